@@ -1,0 +1,149 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+//
+// Speed of the geometric core, reported (never asserted) as absolute times and as ratios to a
+// reference operation measured in the same run: cv::cvtColor(BGR -> HSV) of a 640x480 frame.
+// Run: build/devel/lib/endo_guidance/endo_guidance_bench   (or scripts/bench.sh)
+#include <benchmark/benchmark.h>
+
+#include <map>
+#include <opencv2/imgproc.hpp>
+#include <random>
+
+#include "endo_guidance/core/cylinder_pose.h"
+#include "endo_guidance/core/insertion_point.h"
+#include "endo_guidance/core/insertion_point_tracker.h"
+#include "endo_guidance/core/synthetic_scene.h"
+
+using namespace endo_guidance;
+
+namespace {
+
+std::vector<SyntheticView> const& views() {
+  static std::vector<SyntheticView> v = [] {
+    SyntheticSceneOptions so;
+    so.line_noise_px = 0.5;
+    SyntheticScene scene(defaultInstruments(), so);
+    std::vector<SyntheticView> out;
+    for (int k = 0; k < 400; ++k)
+      for (auto const& x : scene.frame(k)) out.push_back(x);
+    return out;
+  }();
+  return v;
+}
+
+std::vector<PluckerLine> const& axesOf(int instrument) {
+  static std::map<int, std::vector<PluckerLine>> cache;
+  auto& v = cache[instrument];
+  if (v.empty())
+    for (auto const& x : views())
+      if (x.instrument == instrument) {
+        auto const r = estimateCylinderPose(SyntheticSceneOptions{}.K, x.radius, x.measured);
+        if (r.ok()) v.push_back(r.pose.axis);
+      }
+  return v;
+}
+
+void BM_Reference_HSV_640x480(benchmark::State& st) {
+  cv::Mat bgr(480, 640, CV_8UC3), hsv;
+  cv::randu(bgr, 0, 255);
+  cv::setNumThreads(1);
+  for (auto _ : st) {
+    cv::cvtColor(bgr, hsv, cv::COLOR_BGR2HSV);
+    benchmark::DoNotOptimize(hsv.data);
+  }
+}
+BENCHMARK(BM_Reference_HSV_640x480);
+
+void BM_CylinderPose(benchmark::State& st) {
+  auto const& v = views();
+  CylinderPoseOptions o;
+  o.compute_covariance = st.range(0) != 0;
+  std::size_t i = 0;
+  Eigen::Matrix3d const K = SyntheticSceneOptions{}.K;
+  for (auto _ : st) {
+    auto const& x = v[i++ % v.size()];
+    auto r = estimateCylinderPose(K, x.radius, x.measured, o);
+    benchmark::DoNotOptimize(r);
+  }
+}
+BENCHMARK(BM_CylinderPose)->Arg(0)->Arg(1)->ArgName("covariance");
+
+void BM_CylinderPoseConic(benchmark::State& st) {
+  auto const& v = views();
+  std::size_t i = 0;
+  Eigen::Matrix3d const K = SyntheticSceneOptions{}.K;
+  for (auto _ : st) {
+    auto const& x = v[i++ % v.size()];
+    auto r = estimateCylinderPoseConic(K, x.radius, x.measured.lines[0], x.measured.lines[1]);
+    benchmark::DoNotOptimize(r);
+  }
+}
+BENCHMARK(BM_CylinderPoseConic);
+
+void BM_InsertionPointTrackerUpdate(benchmark::State& st) {
+  auto const& a = axesOf(0);
+  InsertionPointTracker t;
+  for (auto const& x : a) t.update(x);  // warm (initialised)
+  std::size_t i = 0;
+  for (auto _ : st) {
+    auto u = t.update(a[i++ % a.size()]);
+    benchmark::DoNotOptimize(u);
+  }
+}
+BENCHMARK(BM_InsertionPointTrackerUpdate);
+
+void BM_InsertionPointSetUpdate3(benchmark::State& st) {
+  std::vector<PluckerLine> all;
+  for (int i = 0; i < 3; ++i) all.insert(all.end(), axesOf(i).begin(), axesOf(i).end());
+  InsertionPointSet set;
+  for (auto const& x : all) set.update(x);
+  std::size_t i = 0;
+  for (auto _ : st) benchmark::DoNotOptimize(set.update(all[i++ % all.size()]));
+}
+BENCHMARK(BM_InsertionPointSetUpdate3);
+
+void BM_IntersectAxesBatch(benchmark::State& st) {
+  auto a = axesOf(0);
+  a.resize(std::min<std::size_t>(a.size(), static_cast<std::size_t>(st.range(0))));
+  for (auto _ : st) benchmark::DoNotOptimize(intersectAxes(a));
+}
+BENCHMARK(BM_IntersectAxesBatch)->Arg(50)->Arg(300);
+
+void BM_IntersectAxesRobust(benchmark::State& st) {
+  auto a = axesOf(0);
+  a.resize(std::min<std::size_t>(a.size(), static_cast<std::size_t>(st.range(0))));
+  for (auto _ : st) benchmark::DoNotOptimize(intersectAxesRobust(a));
+}
+BENCHMARK(BM_IntersectAxesRobust)->Arg(50)->Arg(300);
+
+// Prints each result as a ratio to the reference measured in the same run.
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(std::vector<Run> const& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    double ref = 0.0;
+    for (auto const& [n, t] : times_)
+      if (n.rfind("BM_Reference_HSV_640x480", 0) == 0) ref = t;
+    if (ref <= 0.0) return;
+    std::printf("\nRatio to one cv::cvtColor(BGR->HSV) of a 640x480 frame (%.1f us here):\n", ref / 1e3);
+    for (auto const& [n, t] : times_) std::printf("  %-45s %10.5f\n", n.c_str(), t / ref);
+  }
+
+ private:
+  std::vector<std::pair<std::string, double>> times_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  RatioReporter rep;
+  benchmark::RunSpecifiedBenchmarks(&rep);
+  benchmark::Shutdown();
+  return 0;
+}

@@ -1,0 +1,154 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <cstddef>
+#include <deque>
+#include <vector>
+
+#include "endo_guidance/core/insertion_point.h"
+
+namespace endo_guidance {
+
+using AxisCovariance = Eigen::Matrix<double, 6, 6>;  ///< of (direction, moment), as CylinderPose
+
+struct InsertionPointTrackerOptions {
+  std::size_t window = 300;          ///< axes kept for (re)initialisation (bounded memory)
+  double memory_views = 500.0;       ///< forgetting time constant, in accepted axes (rho = exp(-1/memory)):
+                                     ///< 20 s at 25 Hz spans several breaths, so the mean is estimated
+  std::size_t min_views = 10;        ///< axes needed before the first estimate
+  double min_conditioning = 0.035;   ///< rad (2 deg): below, the estimate is flagged ill-conditioned
+  double default_axis_sigma = 0.001; ///< metres: assumed distance noise of an axis given without covariance
+  double point_motion_sigma = 0.001; ///< metres: RMS motion of the trocar itself (breathing), added to
+                                     ///< every axis's residual covariance
+  double gate_distance = 0.008;      ///< metres: an axis is an outlier beyond max(this, gate_sigmas * spread)
+  double gate_sigmas = 4.0;
+  double gate_max = 0.025;           ///< metres: the gate never widens beyond this
+  std::size_t reinit_after = 40;     ///< consecutive outliers that trigger a robust re-initialisation
+  int reweight_iterations = 3;       ///< Gauss-Markov reweighting passes when (re)initialising
+  RobustIntersectOptions robust;
+};
+
+/// Recursive, weighted form of Eq. (3) for a live stream: one insertion point followed with
+/// exponential forgetting, so that a trocar moving a few millimetres with breathing is
+/// estimated about its mean position.
+///
+/// With B_k = [ [d]x | m ] the first three rows of the dual Plücker matrix (Eq. (2)),
+/// r_k = B_k x~ = d x (x - p) is the distance vector of x~ = (x, 1) to axis k. Each axis is
+/// weighted by the inverse of the covariance of r_k at the current estimate,
+/// \f[ \Sigma_{r,k} = P_k (J \Sigma_k J^\top + \sigma_b^2 I) P_k,\quad J = [\,-[\mathbf{x}]_\times \;\; I\,],\quad P_k = I - \mathbf{d}\mathbf{d}^\top,\qquad
+///     W_k = \Sigma_{r,k}^{+} \f]
+/// (Gauss-Markov: an axis measured far from the trocar has a wide error tube there). Without
+/// this, the angular noise of axes pivoting about their visible part biases a plain
+/// least-squares point toward the image (errors in variables). The tracker keeps
+/// \f[ \mathcal{B}_w = \sum_k \rho^{n-k} B_k^\top W_k B_k = \begin{pmatrix} S & \mathbf{b} \\ \mathbf{b}^\top & c \end{pmatrix},\qquad
+///     \hat{\mathbf{x}} = -S^{-1}\mathbf{b},\quad \mathrm{cov}(\hat{\mathbf{x}}) \approx S^{-1} \f]
+/// and the unweighted sum for the RMS distance and the angular spread. Memory is O(1) plus a
+/// bounded window of recent axes. Axes beyond the gate are rejected (not accumulated); a run of
+/// rejections re-initialises the estimate robustly (LMedS, Eq. (3)) from the most recent axes.
+class InsertionPointTracker {
+ public:
+  enum class Update { kBuffered, kAccepted, kRejected, kReinitialised, kFrozen, kInvalid };
+
+  explicit InsertionPointTracker(InsertionPointTrackerOptions const& options = {});
+
+  /// Feeds one axis (camera frame) and its covariance (zero: default_axis_sigma is assumed).
+  Update update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero());
+  /// Seeds the tracker from a batch of axes (robust Eq. (3), then reweighted on the inliers).
+  bool initialise(std::vector<PluckerLine> const& axes, std::vector<AxisCovariance> const& covariances = {});
+
+  bool initialized() const { return initialized_; }
+  /// The current estimate; status kTooFewAxes until initialised.
+  InsertionPointEstimate const& estimate() const { return estimate_; }
+  /// Distance of an axis to the current estimate (metres); +inf when not initialised.
+  double distanceTo(PluckerLine const& axis) const;
+  /// Distance an axis of this point is expected to stay within (metres): gate_sigmas times the
+  /// combined spread of the axes (rms, the axis's own uncertainty) and of the estimate across
+  /// the axis, clamped to [gate_distance, gate_max].
+  double gate(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero()) const;
+  /// True when initialised with enough views and angular spread.
+  bool wellConditioned() const;
+
+  void reset();
+  void setFrozen(bool frozen) { frozen_ = frozen; }
+  bool frozen() const { return frozen_; }
+  std::size_t rejected() const { return rejected_; }
+  InsertionPointTrackerOptions const& options() const { return options_; }
+
+ private:
+  struct Observation {
+    PluckerLine axis;
+    AxisCovariance covariance;
+  };
+  Eigen::Matrix3d residualCovariance(PluckerLine const& axis, AxisCovariance const& cov, Eigen::Vector3d const& x) const;
+  void accumulate(Observation const& o, Eigen::Vector3d const& at);
+  void clearSums();
+  void solve();
+  bool initialiseFrom(std::vector<Observation> const& obs);
+
+  InsertionPointTrackerOptions options_;
+  double rho_;
+  std::deque<Observation> window_;
+  bool initialized_ = false;
+  bool frozen_ = false;
+  Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
+  Eigen::Matrix4d Bw_ = Eigen::Matrix4d::Zero();  ///< weighted normal matrix (relative to origin_)
+  Eigen::Matrix4d Bu_ = Eigen::Matrix4d::Zero();  ///< unweighted
+  double sw_ = 0.0, sw2_ = 0.0;
+  std::size_t accepted_ = 0, rejected_ = 0, consecutive_rejects_ = 0;
+  InsertionPointEstimate estimate_;
+};
+
+struct InsertionPointSetOptions {
+  int max_points = 0;                 ///< 0 = automatic (discover as many as the axes support)
+  double attach_distance = 0.01;      ///< metres: Eq. (6) threshold for attaching an axis (at least;
+                                      ///< widened to each tracker's gate())
+  double merge_distance = 0.012;      ///< metres: two points closer than this are one (the better kept),
+  double merge_sigmas = 3.0;          ///< or closer than this many sigmas of their covariances (elongated
+                                      ///< along the axes while the spread is small)
+  std::size_t prune_after = 250;      ///< axes fed to the set without one for a weak point: it is dropped
+  std::size_t prune_max_views = 60;   ///< a point with fewer views than this is weak
+  std::size_t pool_size = 400;        ///< unattached axes kept for discovering new points
+  std::size_t discover_min_inliers = 15;  ///< axes agreeing on a new point before it is created
+  double discover_min_spread = 0.02;  ///< rad: and their angular spread
+  double discover_max_rms = 0.006;    ///< metres: and their RMS distance (the tips' region, where all
+                                      ///< shafts pass within a few cm, is not a trocar)
+  std::size_t discover_every = 10;    ///< try discovery every N unattached axes
+  InsertionPointTrackerOptions tracker;
+};
+
+/// Several insertion points: each new axis is attached (Eq. (6)) to the nearest tracked point
+/// within its gate, or pooled; the pool is searched robustly for new points.
+class InsertionPointSet {
+ public:
+  explicit InsertionPointSet(InsertionPointSetOptions const& options = {});
+  /// Feeds one axis; returns the id of the point it was attached to, or -1.
+  int update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero());
+  /// Id of the point an axis passes through (nearest within its gate), or -1; no update.
+  int classify(PluckerLine const& axis, double* distance = nullptr,
+               AxisCovariance const& covariance = AxisCovariance::Zero()) const;
+  struct Entry {
+    int id;
+    InsertionPointTracker tracker;
+    std::size_t last_update = 0;  ///< value of the set's axis counter when it last took an axis
+  };
+  std::vector<Entry> const& points() const { return points_; }
+  InsertionPointTracker* find(int id);
+  bool reset(int id);   ///< forget one point (it will be rediscovered); false if unknown
+  void resetAll();
+  bool setFrozen(int id, bool frozen);
+
+ private:
+  void discover();
+  void mergeDuplicates();
+  void dropExplained();
+  void prune();
+  bool samePoint(InsertionPointEstimate const& a, InsertionPointEstimate const& b) const;
+  InsertionPointSetOptions options_;
+  std::size_t fed_ = 0;
+  std::vector<Entry> points_;
+  std::deque<std::pair<PluckerLine, AxisCovariance>> pool_;
+  std::size_t since_discover_ = 0;
+  int next_id_ = 0;
+};
+
+}  // namespace endo_guidance

@@ -1,0 +1,320 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/insertion_point_tracker.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "endo_guidance/core/classification.h"
+
+namespace endo_guidance {
+
+InsertionPointTracker::InsertionPointTracker(InsertionPointTrackerOptions const& o)
+    : options_(o), rho_(std::exp(-1.0 / std::max(1.0, o.memory_views))) {}
+
+void InsertionPointTracker::clearSums() {
+  Bw_.setZero();
+  Bu_.setZero();
+  sw_ = sw2_ = 0.0;
+  accepted_ = consecutive_rejects_ = 0;
+}
+
+void InsertionPointTracker::reset() {
+  window_.clear();
+  initialized_ = false;
+  clearSums();
+  rejected_ = 0;
+  estimate_ = InsertionPointEstimate{};
+}
+
+double InsertionPointTracker::distanceTo(PluckerLine const& axis) const {
+  if (!initialized_ || !estimate_.ok()) return std::numeric_limits<double>::infinity();
+  return axis.distanceTo(estimate_.position);
+}
+
+Eigen::Matrix3d InsertionPointTracker::residualCovariance(PluckerLine const& axis, AxisCovariance const& cov,
+                                                          Eigen::Vector3d const& x) const {
+  Eigen::Vector3d const& d = axis.direction();
+  Eigen::Matrix3d const P = Eigen::Matrix3d::Identity() - d * d.transpose();
+  double const b2 = options_.point_motion_sigma * options_.point_motion_sigma;  // the trocar's own motion
+  if (cov.isZero(0.0) || !cov.allFinite()) {
+    double const s = options_.default_axis_sigma;
+    return (0.5 * s * s + b2) * P;  // s^2 in all, split over the two directions across the axis
+  }
+  // r = d x x + m:  dr/dd = -[x]x, dr/dm = I.
+  Eigen::Matrix<double, 3, 6> J;
+  J.leftCols<3>() = -skew(x);
+  J.rightCols<3>().setIdentity();
+  return P * (J * cov * J.transpose() + b2 * Eigen::Matrix3d::Identity()) * P;
+}
+
+double InsertionPointTracker::gate(PluckerLine const& axis, AxisCovariance const& cov) const {
+  if (!initialized_ || !estimate_.ok()) return std::numeric_limits<double>::infinity();
+  Eigen::Matrix3d const P = Eigen::Matrix3d::Identity() - axis.direction() * axis.direction().transpose();
+  double const across = (P * estimate_.covariance * P).trace();  // the estimate's variance across the axis
+  double const own = residualCovariance(axis, cov, estimate_.position).trace();
+  double const rms2 = estimate_.rms_distance * estimate_.rms_distance;
+  double const spread = std::sqrt(std::max(rms2, own) + std::max(0.0, across));
+  return std::clamp(options_.gate_sigmas * spread, options_.gate_distance,
+                    std::max(options_.gate_distance, options_.gate_max));
+}
+
+bool InsertionPointTracker::wellConditioned() const {
+  return initialized_ && estimate_.ok() && estimate_.views >= options_.min_views &&
+         estimate_.conditioning >= options_.min_conditioning;
+}
+
+void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d const& at) {
+  Eigen::Vector3d const& d = o.axis.direction();
+  Eigen::Vector3d const m = o.axis.moment() - origin_.cross(d);  // the axis relative to origin_
+  Eigen::Matrix<double, 3, 4> Bk;
+  Bk.leftCols<3>() = skew(d);  // first three rows of L*, Eq. (2)
+  Bk.col(3) = m;
+  // W = pseudo-inverse of the residual covariance on the plane across the axis.
+  Eigen::Matrix3d const Sr = residualCovariance(o.axis, o.covariance, at);
+  Eigen::Vector3d const e1 = d.unitOrthogonal(), e2 = d.cross(e1);
+  Eigen::Matrix<double, 3, 2> E;
+  E << e1, e2;
+  Eigen::Matrix2d S2 = E.transpose() * Sr * E;
+  S2.diagonal().array() += 1e-12;  // floor: 1 um
+  Eigen::Matrix3d const W = E * S2.inverse() * E.transpose();
+  Bw_ = rho_ * Bw_ + Bk.transpose() * W * Bk;
+  Bu_ = rho_ * Bu_ + Bk.transpose() * Bk;
+  sw_ = rho_ * sw_ + 1.0;
+  sw2_ = rho_ * rho_ * sw2_ + 1.0;
+  ++accepted_;
+}
+
+void InsertionPointTracker::solve() {
+  InsertionPointEstimate e;
+  e.views = std::min<std::size_t>(accepted_, static_cast<std::size_t>(std::llround(sw_)));
+  Eigen::Matrix3d const Su = Bu_.topLeftCorner<3, 3>();  // sum (I - d d^T)
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Su / std::max(sw_, 1e-300), Eigen::EigenvaluesOnly);
+  e.conditioning = std::sqrt(std::max(0.0, es.eigenvalues()(0)));
+  Eigen::Matrix3d const S = Bw_.topLeftCorner<3, 3>();
+  Eigen::Vector3d const b = Bw_.topRightCorner<3, 1>();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> sw(S);
+  // Parallel axes: S singular (the common point is at infinity).
+  if (!(sw.eigenvalues()(0) > 1e-10 * std::max(sw.eigenvalues()(2), 1e-300))) {
+    e.status = InsertionPointStatus::kAtInfinity;
+    estimate_ = e;
+    return;
+  }
+  Eigen::Matrix3d const Sinv = sw.eigenvectors() * sw.eigenvalues().cwiseInverse().asDiagonal() * sw.eigenvectors().transpose();
+  Eigen::Vector3d const x = -Sinv * b;  // weighted least squares with I_4 = 1
+  Eigen::Vector4d xt;
+  xt << x, 1.0;
+  e.rms_distance = std::sqrt(std::max(0.0, xt.dot(Bu_ * xt)) / std::max(sw_, 1e-300));
+  // Forgetting: cov ~ S^-1 sw2/sw; inflated by the normalised chi^2 when the axes scatter more
+  // than their covariances say (breathing, model error).
+  double const n_eff = sw_ * sw_ / std::max(sw2_, 1e-300);
+  double const dof = std::max(1.0, 2.0 * n_eff - 3.0);
+  double const chi2 = std::max(0.0, xt.dot(Bw_ * xt)) * n_eff / sw_ / dof;
+  e.covariance = Sinv * (sw2_ / sw_) * std::max(1.0, chi2);
+  e.position = x + origin_;
+  Eigen::Vector4d h;
+  h << e.position, 1.0;
+  h.normalize();
+  if (h(2) < 0.0) h = -h;  // sign convention I_z > 0
+  e.homogeneous = h;
+  e.status = InsertionPointStatus::kOk;
+  estimate_ = e;
+}
+
+bool InsertionPointTracker::initialiseFrom(std::vector<Observation> const& obs) {
+  std::vector<PluckerLine> axes;
+  for (auto const& o : obs) axes.push_back(o.axis);
+  InsertionPointEstimate const e = intersectAxesRobust(axes, options_.robust);  // Eq. (3), LMedS
+  if (!e.ok() || e.inliers.size() < 2) return false;
+  origin_ = e.position;
+  Eigen::Vector3d at = e.position;
+  for (int it = 0; it < std::max(1, options_.reweight_iterations); ++it) {
+    clearSums();
+    for (int i : e.inliers) accumulate(obs[static_cast<std::size_t>(i)], at);
+    initialized_ = true;
+    solve();
+    if (!estimate_.ok()) break;
+    at = estimate_.position;
+  }
+  if (!estimate_.ok()) initialized_ = false;
+  return estimate_.ok();
+}
+
+bool InsertionPointTracker::initialise(std::vector<PluckerLine> const& axes,
+                                       std::vector<AxisCovariance> const& covariances) {
+  std::vector<Observation> obs;
+  for (std::size_t i = 0; i < axes.size(); ++i)
+    obs.push_back({axes[i], i < covariances.size() ? covariances[i] : AxisCovariance::Zero()});
+  return initialiseFrom(obs);
+}
+
+InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& axis, AxisCovariance const& cov) {
+  if (!axis.direction().allFinite() || !axis.moment().allFinite() || !cov.allFinite()) return Update::kInvalid;
+  if (frozen_) return Update::kFrozen;
+  window_.push_back({axis, cov});
+  while (window_.size() > options_.window) window_.pop_front();
+  if (!initialized_) {
+    if (window_.size() < options_.min_views) return Update::kBuffered;
+    return initialiseFrom({window_.begin(), window_.end()}) ? Update::kAccepted : Update::kBuffered;
+  }
+  if (!estimate_.ok() || axis.distanceTo(estimate_.position) > gate(axis, cov)) {
+    ++rejected_;
+    if (++consecutive_rejects_ < options_.reinit_after) return Update::kRejected;
+    // A run of outliers: the point moved (or was wrong). Re-initialise from recent axes only.
+    std::size_t const recent = std::min(window_.size(), 2 * options_.reinit_after);
+    return initialiseFrom({window_.end() - static_cast<long>(recent), window_.end()}) ? Update::kReinitialised
+                                                                                       : Update::kRejected;
+  }
+  consecutive_rejects_ = 0;
+  accumulate({axis, cov}, estimate_.position);
+  solve();
+  return Update::kAccepted;
+}
+
+// --------------------------------------------------------------------------------------------
+
+InsertionPointSet::InsertionPointSet(InsertionPointSetOptions const& o) : options_(o) {}
+
+int InsertionPointSet::classify(PluckerLine const& axis, double* distance, AxisCovariance const& cov) const {
+  // Eq. (6): the nearest point, in units of each point's own gate, if within it.
+  int best = -1;
+  double best_ratio = std::numeric_limits<double>::infinity(), best_d = best_ratio;
+  for (auto const& p : points_) {
+    if (!p.tracker.initialized() || !p.tracker.estimate().ok()) continue;
+    double const dd = classifyAxis(axis, {p.tracker.estimate().position}, 1.0).distance;
+    double const tau = std::max(options_.attach_distance, p.tracker.gate(axis, cov));
+    if (dd / tau < best_ratio) {
+      best_ratio = dd / tau;
+      best_d = dd;
+      best = p.id;
+    }
+  }
+  if (distance) *distance = best_d;
+  return best_ratio < 1.0 ? best : -1;
+}
+
+InsertionPointTracker* InsertionPointSet::find(int id) {
+  for (auto& p : points_)
+    if (p.id == id) return &p.tracker;
+  return nullptr;
+}
+
+int InsertionPointSet::update(PluckerLine const& axis, AxisCovariance const& cov) {
+  if (!axis.direction().allFinite() || !axis.moment().allFinite() || !cov.allFinite()) return -1;
+  ++fed_;
+  prune();
+  int const id = classify(axis, nullptr, cov);
+  if (id >= 0) {
+    for (auto& p : points_)
+      if (p.id == id) {
+        p.tracker.update(axis, cov);
+        p.last_update = fed_;
+      }
+    mergeDuplicates();
+    return find(id) ? id : classify(axis, nullptr, cov);  // merged away: report the survivor
+  }
+  pool_.emplace_back(axis, cov);
+  while (pool_.size() > options_.pool_size) pool_.pop_front();
+  if (++since_discover_ >= options_.discover_every) {
+    since_discover_ = 0;
+    discover();
+  }
+  return -1;
+}
+
+void InsertionPointSet::discover() {
+  if (options_.max_points > 0 && static_cast<int>(points_.size()) >= options_.max_points) return;
+  if (pool_.size() < options_.discover_min_inliers) return;
+  std::vector<PluckerLine> axes;
+  for (auto const& a : pool_) axes.push_back(a.first);
+  // With several unknown points in the pool, the largest cluster need not be half of it: look
+  // for the best-supported point at a quantile that the smallest admissible cluster reaches.
+  RobustIntersectOptions ro = options_.tracker.robust;
+  ro.inlier_fraction = std::max(0.1, static_cast<double>(options_.discover_min_inliers) / axes.size());
+  InsertionPointEstimate const e = intersectAxesRobust(axes, ro);
+  if (!e.ok() || e.inliers.size() < options_.discover_min_inliers || e.conditioning < options_.discover_min_spread ||
+      e.rms_distance > options_.discover_max_rms)
+    return;
+  std::vector<PluckerLine> inl;
+  std::vector<AxisCovariance> cov;
+  for (int i : e.inliers) {
+    inl.push_back(pool_[static_cast<std::size_t>(i)].first);
+    cov.push_back(pool_[static_cast<std::size_t>(i)].second);
+  }
+  // A cluster at a known point is that point's (its axes strayed beyond the gate early on).
+  for (auto& p : points_)
+    if (p.tracker.estimate().ok() && samePoint(p.tracker.estimate(), e)) {
+      for (std::size_t i = 0; i < inl.size(); ++i) p.tracker.update(inl[i], cov[i]);
+      p.last_update = fed_;
+      dropExplained();
+      return;
+    }
+  Entry entry{next_id_, InsertionPointTracker(options_.tracker), fed_};
+  if (!entry.tracker.initialise(inl, cov)) return;
+  ++next_id_;
+  points_.push_back(std::move(entry));
+  dropExplained();
+}
+
+void InsertionPointSet::dropExplained() {
+  std::deque<std::pair<PluckerLine, AxisCovariance>> rest;
+  for (auto const& a : pool_)
+    if (classify(a.first, nullptr, a.second) < 0) rest.push_back(a);
+  pool_.swap(rest);
+}
+
+void InsertionPointSet::mergeDuplicates() {
+  for (std::size_t i = 0; i < points_.size(); ++i)
+    for (std::size_t j = i + 1; j < points_.size(); ++j) {
+      auto const& a = points_[i].tracker.estimate();
+      auto const& b = points_[j].tracker.estimate();
+      if (!a.ok() || !b.ok() || !samePoint(a, b)) continue;
+      points_.erase(points_.begin() + static_cast<long>(a.views >= b.views ? j : i));
+      mergeDuplicates();
+      return;
+    }
+}
+
+bool InsertionPointSet::samePoint(InsertionPointEstimate const& a, InsertionPointEstimate const& b) const {
+  Eigen::Vector3d const d = a.position - b.position;
+  if (d.norm() < options_.merge_distance) return true;
+  Eigen::Matrix3d const S = a.covariance + b.covariance;
+  Eigen::FullPivLU<Eigen::Matrix3d> lu(S);
+  if (!lu.isInvertible()) return false;
+  return d.dot(lu.solve(d)) < options_.merge_sigmas * options_.merge_sigmas;
+}
+
+void InsertionPointSet::prune() {
+  points_.erase(std::remove_if(points_.begin(), points_.end(),
+                               [&](Entry const& p) {
+                                 return p.tracker.estimate().views < options_.prune_max_views &&
+                                        fed_ - p.last_update > options_.prune_after;
+                               }),
+                points_.end());
+}
+
+bool InsertionPointSet::reset(int id) {
+  for (auto it = points_.begin(); it != points_.end(); ++it)
+    if (it->id == id) {
+      points_.erase(it);
+      return true;
+    }
+  return false;
+}
+
+void InsertionPointSet::resetAll() {
+  points_.clear();
+  pool_.clear();
+  since_discover_ = 0;
+}
+
+bool InsertionPointSet::setFrozen(int id, bool frozen) {
+  InsertionPointTracker* t = find(id);
+  if (!t) return false;
+  t->setFrozen(frozen);
+  return true;
+}
+
+}  // namespace endo_guidance

@@ -1,0 +1,94 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/synthetic_scene.h"
+
+#include <cmath>
+
+#include "endo_guidance/core/cylinder_pose.h"
+
+namespace endo_guidance {
+
+std::vector<SyntheticInstrument> defaultInstruments() {
+  std::vector<SyntheticInstrument> v(3);
+  // Left, right and top trocars, a few cm behind or in front of the optical centre.
+  v[0] = {{-0.10, 0.03, 0.01}, {-0.005, 0.01, 0.12}, {0.045, 0.035, 0.025}, {0.11, 0.07, 0.05}, 0.0025};
+  v[1] = {{0.11, 0.02, 0.02}, {0.01, 0.015, 0.13}, {0.04, 0.04, 0.025}, {0.09, 0.13, 0.04}, 0.004};
+  v[2] = {{0.01, -0.12, 0.03}, {0.0, -0.005, 0.14}, {0.05, 0.03, 0.025}, {0.07, 0.10, 0.06}, 0.005};
+  return v;
+}
+
+SyntheticScene::SyntheticScene(std::vector<SyntheticInstrument> instruments, SyntheticSceneOptions const& options)
+    : instruments_(std::move(instruments)), options_(options), rng_(options.seed) {}
+
+Eigen::Vector3d SyntheticScene::trocarAt(int i, int k) const {
+  double const t = k / options_.fps;
+  double const b = options_.breathing_amplitude * std::sin(2.0 * M_PI * t / options_.breathing_period + 0.7 * i);
+  return instruments_[i].trocar_c + b * options_.breathing_direction;
+}
+
+std::vector<SyntheticView> SyntheticScene::frame(int k) {
+  std::vector<SyntheticView> out;
+  double const t = k / options_.fps;
+  std::normal_distribution<double> noise(0.0, 1.0);
+  Eigen::Matrix3d const& K = options_.K;
+  for (int i = 0; i < static_cast<int>(instruments_.size()); ++i) {
+    SyntheticInstrument const& ins = instruments_[i];
+    SyntheticView v;
+    v.instrument = i;
+    v.radius = ins.radius;
+    v.trocar_c = trocarAt(i, k);
+    Eigen::Vector3d tip = ins.tip_centre_c;
+    for (int a = 0; a < 3; ++a) tip(a) += ins.tip_amplitude(a) * std::sin(2.0 * M_PI * ins.tip_frequency(a) * t + a);
+    v.tip_c = tip;
+    auto axis = PluckerLine::through(v.trocar_c, tip);
+    if (!axis) continue;
+    v.axis = *axis;
+    auto const lines = projectCylinder(K, v.axis, ins.radius);
+    if (!lines) continue;
+    // Tip pixel; entry: where the imaged axis leaves the image on the trocar side.
+    Eigen::Vector3d const tp = K * tip;
+    if (tp.z() <= 0.0) continue;
+    Eigen::Vector2d const tip_px = tp.head<2>() / tp.z();
+    if (tip_px.x() < 5 || tip_px.y() < 5 || tip_px.x() > options_.width - 6 || tip_px.y() > options_.height - 6)
+      continue;
+    auto const axis_img = v.axis.project(K);
+    if (!axis_img) continue;
+    auto const seg = clipLineToImage(*axis_img, options_.width, options_.height);
+    if (!seg) continue;
+    // Image direction entry -> tip: the projection of d at the tip.
+    Eigen::Vector3d const tp2 = K * (tip + 1e-3 * v.axis.direction());
+    Eigen::Vector2d const dir = (tp2.head<2>() / tp2.z() - tip_px).normalized();
+    Eigen::Vector2d entry = ((*seg)[0] - tip_px).dot(dir) < ((*seg)[1] - tip_px).dot(dir) ? (*seg)[0] : (*seg)[1];
+    if ((entry - tip_px).dot(dir) > 0.0 || (entry - tip_px).norm() < 40.0) continue;  // tip must be past the entry
+    v.truth.lines = *lines;
+    v.truth.entry_px = entry;
+    v.truth.tip_px = tip_px;
+    v.measured = v.truth;
+    // Measured lines: each contour between the perpendicular feet of entry and tip, endpoints
+    // displaced along the normal by N(0, sigma), refitted; orientation kept.
+    double rs = 0.0;
+    for (int j = 0; j < 2; ++j) {
+      ImageLine const& l = (*lines)[j];
+      Eigen::Vector2d const n = l.head<2>();
+      Eigen::Vector2d p = entry - n * l.dot(Eigen::Vector3d(entry.x(), entry.y(), 1.0));
+      Eigen::Vector2d q = tip_px - n * l.dot(Eigen::Vector3d(tip_px.x(), tip_px.y(), 1.0));
+      Eigen::Vector2d const p0 = p, q0 = q;
+      double const s = options_.line_noise_px;
+      if (s > 0.0) {
+        p += n * s * noise(rng_);
+        q += n * s * noise(rng_);
+      }
+      auto lm = lineThrough(p, q);
+      if (!lm) lm = l;
+      if (lm->head<2>().dot(n) < 0.0) *lm = -*lm;
+      v.measured.lines[j] = *lm;
+      v.measured.line_covariances[j] = lineCovarianceFromSegment(*lm, p0, q0, std::max(s, 1e-3), 2);
+      rs += s * s;
+    }
+    v.measured.residual_px = std::sqrt(rs / 2.0);
+    v.measured.line_residual_px = {options_.line_noise_px, options_.line_noise_px};
+    out.push_back(v);
+  }
+  return out;
+}
+
+}  // namespace endo_guidance
