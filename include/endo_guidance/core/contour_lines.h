@@ -1,0 +1,93 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <vector>
+
+#include "endo_guidance/core/apparent_contour.h"
+#include "endo_guidance/core/field_of_view.h"
+#include "endo_guidance/core/region_growing.h"
+
+namespace endo_guidance {
+
+struct ContourLinesParams {
+  int border_margin = 2;          ///< processing px: boundary points this close to the FOV edge are the entry
+  int min_side_points = 10;       ///< boundary points per side (processing px)
+  double min_inlier_fraction = 0.5;  ///< LMedS inliers per side: fewer and the side is not a straight line
+  double max_angle_deg = 20.0;    ///< between the two contour lines
+  double min_length_px = 30.0;    ///< full-res: entry to tip
+  double min_width_px = 3.0;      ///< full-res: shaft width at entry and tip
+  int lmeds_samples = 60;         ///< random pairs per side
+  double refine_step_px = 2.0;    ///< full-res: spacing of the edge profiles along a line
+  double refine_halfwidth_px = 3.5;  ///< full-res: half length of each profile across the line (final pass)
+  double coarse_halfwidth_px = 9.0;  ///< full-res: the same for the first, wide pass
+  double min_edge_contrast = 2.5; ///< chroma units per px: weaker profiles carry no edge
+  int min_edge_points = 8;        ///< sub-pixel edge points per line
+  double max_residual_px = 3.0;   ///< RMS of the sub-pixel edge points to their line
+  double min_elongation = 2.0;    ///< length (entry to tip) over mean width
+  double min_entry_sine = 0.2;    ///< sine of the angle between the shaft and the FOV border at the entry
+  double min_fill = 0.45;         ///< fraction of the strip between the lines covered by the region
+  double min_inside = 0.6;        ///< fraction of the region inside that strip
+  std::uint64_t seed = 7;
+};
+
+enum class ContourRejection {
+  kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
+  kNotElongated, kNotFilled, kAlongBorder
+};
+char const* toString(ContourRejection r);
+
+/// A line fitted robustly to points: least median of squares over random pairs, then least squares
+/// on the inliers ([Rousseeuw87]). `line` is normalised (a^2 + b^2 = 1), orientation arbitrary.
+struct RobustLine {
+  Eigen::Vector3d line = Eigen::Vector3d::Zero();
+  std::vector<int> inliers;
+  double sigma = 0.0;  ///< robust scale of the residuals
+};
+std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, int samples, std::uint64_t seed);
+
+/// Sub-pixel edge points of a shaft side: profiles across `line` (full-res pixels, positive side
+/// = shaft) every step px between parameters t0..t1 (along the line direction (-b, a)), located at
+/// the steepest descent of the chroma from tissue to shaft (parabolic peak), then a robust
+/// least-squares line (Tukey reweighting) with its covariance and RMS residual.
+struct RefinedLine {
+  ImageLine line = ImageLine::Zero();
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  double residual_px = 0.0;
+  int points = 0;
+};
+std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& params);
+
+/// [Doignon07] Sec. 3: the ordered region boundary is split in two classes at the boundary point
+/// farthest from the seed (points on the FOV border excluded), a line is fitted to each class
+/// (LMedS, then sub-pixel on the full-resolution image), and the region is rejected unless its
+/// boundary is two straight, near-parallel lines around a shaft of some length and width.
+/// `scale` maps processing pixels to full-resolution ones (p_full = scale p + (scale - 1) / 2).
+struct ContourFit {
+  std::optional<ApparentContour> contour;
+  ContourRejection rejection = ContourRejection::kNone;
+  int edge_points = 0;  ///< sub-pixel edge points behind both lines
+};
+ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full, int scale,
+                              ContourLinesParams const& params);
+
+/// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
+/// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
+struct SideFit {
+  std::array<Eigen::Vector3d, 2> lines{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  std::array<std::vector<Eigen::Vector2d>, 2> points;
+  Eigen::Vector2d entry = Eigen::Vector2d::Zero(), far = Eigen::Vector2d::Zero();
+  int inliers = 0;  ///< LMedS inliers over both sides: the quality of the straight-line pair
+  ContourRejection rejection = ContourRejection::kNone;
+};
+SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+/// The second half: sub-pixel lines, order, tip and the length/width checks.
+ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full,
+                         int scale, ContourLinesParams const& params);
+
+}  // namespace endo_guidance

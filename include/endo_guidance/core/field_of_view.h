@@ -1,0 +1,32 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <vector>
+
+namespace endo_guidance {
+
+struct FieldOfViewParams {
+  int dark_threshold = 24;   ///< max(B,G,R) at or below this is the black surround (0..255)
+  int inset = 3;             ///< pixels: the border path runs this far inside the valid area
+  double min_area_fraction = 0.2;  ///< below: the whole image is taken as the field of view
+};
+
+/// The valid (lit) image area of an endoscope: the full rectangle, a rectangle between black side
+/// bars, or the disc of a circular endoscope with black surround. Instruments enter the view
+/// across its border, so the seed search runs along `border`.
+struct FieldOfView {
+  cv::Mat mask;                     ///< CV_8U, 255 inside (eroded by `inset`)
+  std::vector<cv::Point> border;    ///< closed path just inside the area, ordered, 8-connected
+  cv::Rect bounds;                  ///< bounding box of the area
+  bool circular = false;            ///< the area is a disc (fill ratio of its box ~ pi/4)
+  cv::Point2f centre;               ///< centroid of the area
+  cv::Mat depth;                    ///< CV_32F: distance (px) of each pixel to the area's edge (0 outside)
+  bool valid() const { return !border.empty(); }
+};
+
+/// Detects the field of view on a (possibly down-scaled) BGR image. The area is the convex hull
+/// of the largest lit region, so dark shafts crossing the border do not notch it.
+FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& params = {});
+
+}  // namespace endo_guidance

@@ -1,0 +1,54 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <optional>
+#include <vector>
+
+#include "endo_guidance/core/field_of_view.h"
+#include "endo_guidance/core/seed_search.h"
+
+namespace endo_guidance {
+
+struct RegionGrowingParams {
+  /// Growth thresholds tried for each seed, ascending: pixels with feature at or below join the
+  /// region. Pale tissue (membranes, peritoneum) is low in some images and not in others; the
+  /// segmentation keeps the level whose boundary is the best pair of straight lines.
+  std::vector<int> thresholds{18, 24, 30, 37, 45};
+  int min_area = 40;               ///< processing px: smaller regions are not shafts
+  double max_area_fraction = 0.35; ///< of the field of view: larger ones have leaked into tissue
+  int max_regions = 8;             ///< accepted regions per frame
+};
+
+/// A grown region and its ordered outer boundary.
+struct Region {
+  int seed_index = -1;               ///< the seed it grew from
+  int threshold = 0;                 ///< growth threshold used
+  cv::Point seed;                    ///< processing-scale pixels
+  cv::Rect box;
+  int area = 0;
+  std::vector<cv::Point> boundary;   ///< closed, ordered (8-connected) outer boundary
+};
+
+/// Region growing from a seed over the 4-connected pixels whose (filtered) feature is at most a
+/// threshold, inside the field of view and outside the regions already claimed in this frame.
+class RegionGrower {
+ public:
+  /// Starts a frame: the filtered feature and the field of view (same size).
+  void reset(cv::Mat const& feature, FieldOfView const& fov);
+  /// The region of `seed` at `threshold`; nullopt if the seed is above it or already claimed.
+  std::optional<Region> grow(cv::Point seed, int threshold, int seed_index = -1);
+  /// Marks a region as taken (later seeds inside it are skipped; it is drawn in labels()).
+  void claim(Region const& r, int label);
+  bool claimed(cv::Point p) const { return base_.at<std::uint8_t>(p.y + 1, p.x + 1) != 0; }
+  /// Label image (CV_8U, feature size): 0 = none, k = k-th claimed region.
+  cv::Mat const& labels() const { return labels_; }
+
+ private:
+  cv::Mat feature_;
+  cv::Mat base_;     // (rows+2)x(cols+2): 1 outside the FOV and on claimed regions
+  cv::Mat scratch_;
+  cv::Mat labels_;
+};
+
+}  // namespace endo_guidance

@@ -1,0 +1,71 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "endo_guidance/core/apparent_contour.h"
+#include "endo_guidance/core/colour_feature.h"
+#include "endo_guidance/core/contour_lines.h"
+#include "endo_guidance/core/field_of_view.h"
+#include "endo_guidance/core/region_growing.h"
+#include "endo_guidance/core/seed_search.h"
+
+namespace endo_guidance {
+
+/// All knobs of the segmentation (config/pipeline.yaml mirrors these defaults).
+struct SegmentationParams {
+  int processing_width = 320;     ///< the region stages run on the image reduced by an integer factor to about this width
+  int sigma_radius = 1;           ///< Sigma filter window radius (processing px)
+  int sigma_delta = 10;           ///< Sigma filter range (feature units)
+  int fov_refresh = 25;           ///< frames between field-of-view detections (it rarely changes)
+  ColourFeatureParams feature;
+  FieldOfViewParams fov;
+  SeedSearchParams seeds;
+  RegionGrowingParams regions;
+  ContourLinesParams contours;
+};
+
+/// What one frame gave, with the intermediate results for overlays and diagnostics.
+struct SegmentationResult {
+  std::vector<ApparentContour> contours;  ///< accepted shafts (full-resolution pixels)
+  std::vector<Seed> seeds;                ///< processing-scale pixels
+  std::vector<Region> regions;            ///< processing-scale pixels
+  std::vector<ContourRejection> region_status;  ///< per region: kNone = accepted
+  int scale = 1;                          ///< processing -> full resolution factor
+};
+
+/// Instrument segmentation, [Doignon07] Sec. 3: S.H colour feature -> Sigma filter -> seeds along
+/// the field-of-view border -> region growing -> two-class boundary split -> LMedS line pair ->
+/// sub-pixel lines on the full-resolution image. Stateful only through the cached field of
+/// view; not thread-safe (one instance per stream).
+class InstrumentSegmenter {
+ public:
+  explicit InstrumentSegmenter(SegmentationParams const& params = {});
+  /// Segments one BGR frame. `trocar_images`: homogeneous images of the known insertion points
+  /// in full-resolution pixels ([Doignon07] Sec. 4), focusing the seed search; may be empty.
+  SegmentationResult process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocar_images = {});
+  void setParams(SegmentationParams const& p);
+  SegmentationParams const& params() const { return params_; }
+  FieldOfView const& fieldOfView() const { return fov_; }
+  /// Intermediate images of the last frame (processing scale), for debugging and overlays.
+  cv::Mat const& feature() const { return filtered_; }
+  cv::Mat const& labels() const { return labels_; }
+
+ private:
+  SegmentationParams params_;
+  ColourFeature colour_;
+  FieldOfView fov_;
+  cv::Size fov_size_;
+  int frames_since_fov_ = 0;
+  RegionGrower grower_;
+  cv::Mat small_, raw_, filtered_, labels_;
+};
+
+/// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image
+/// (seed Fig. 1, 2, 6).
+void drawSegmentationOverlay(cv::Mat& bgr, SegmentationResult const& result,
+                             std::vector<Eigen::Vector3d> const& trocar_images = {});
+
+}  // namespace endo_guidance

@@ -1,0 +1,432 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/contour_lines.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <opencv2/imgproc.hpp>
+#include <random>
+
+#include "endo_guidance/core/colour_feature.h"
+
+namespace endo_guidance {
+
+char const* toString(ContourRejection r) {
+  switch (r) {
+    case ContourRejection::kNone: return "accepted";
+    case ContourRejection::kTooFewPoints: return "too few boundary points on a side";
+    case ContourRejection::kNotStraight: return "a side is not a straight line";
+    case ContourRejection::kNotParallel: return "the two sides are not near-parallel";
+    case ContourRejection::kTooShort: return "shaft too short";
+    case ContourRejection::kTooThin: return "shaft too thin";
+    case ContourRejection::kCrossing: return "the sides cross or do not enclose the region";
+    case ContourRejection::kWeakEdges: return "too few sub-pixel edge points";
+    case ContourRejection::kResidual: return "sub-pixel edge residual too large";
+    case ContourRejection::kNotElongated: return "not elongated";
+    case ContourRejection::kNotFilled: return "region does not fill the strip between its lines";
+    case ContourRejection::kAlongBorder: return "runs along the field-of-view border instead of into the view";
+  }
+  return "unknown";
+}
+
+namespace {
+
+// Total least squares line through weighted points.
+std::optional<Eigen::Vector3d> fitLineLS(std::vector<Eigen::Vector2d> const& pts, std::vector<double> const* w = nullptr) {
+  double sw = 0.0;
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    double const wi = w ? (*w)[i] : 1.0;
+    c += wi * pts[i];
+    sw += wi;
+  }
+  if (sw <= 0.0) return std::nullopt;
+  c /= sw;
+  Eigen::Matrix2d S = Eigen::Matrix2d::Zero();
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    double const wi = w ? (*w)[i] : 1.0;
+    Eigen::Vector2d const d = pts[i] - c;
+    S += wi * d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
+  Eigen::Vector2d const n = es.eigenvectors().col(0);  // normal: smallest scatter
+  return Eigen::Vector3d(n.x(), n.y(), -n.dot(c));
+}
+
+// Bilinear sample of the chroma of a BGR image at (x, y); false outside.
+bool chromaAt(cv::Mat const& bgr, double x, double y, float* out) {
+  if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
+  int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  std::uint8_t const* p0 = bgr.ptr<std::uint8_t>(y0) + 3 * x0;
+  std::uint8_t const* p1 = bgr.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
+  float c[3];
+  for (int k = 0; k < 3; ++k)
+    c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
+  *out = ColourFeature::chroma(c[0], c[1], c[2]);
+  return true;
+}
+
+}  // namespace
+
+std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, int samples, std::uint64_t seed) {
+  int const n = static_cast<int>(pts.size());
+  if (n < 2) return std::nullopt;
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  std::vector<double> r(static_cast<std::size_t>(n));
+  double best = std::numeric_limits<double>::infinity();
+  Eigen::Vector3d bl = Eigen::Vector3d::Zero();
+  int const k = n / 2;
+  for (int s = 0; s < samples; ++s) {
+    int const i = pick(rng), j = pick(rng);
+    Eigen::Vector2d const d = pts[j] - pts[i];
+    double const len = d.norm();
+    if (len < 2.0) continue;
+    Eigen::Vector2d const nrm(-d.y() / len, d.x() / len);
+    double const c = -nrm.dot(pts[i]);
+    for (int m = 0; m < n; ++m) {
+      double const e = nrm.dot(pts[m]) + c;
+      r[m] = e * e;
+    }
+    std::nth_element(r.begin(), r.begin() + k, r.end());
+    if (r[k] < best) {
+      best = r[k];
+      bl = Eigen::Vector3d(nrm.x(), nrm.y(), c);
+    }
+  }
+  if (!std::isfinite(best)) return std::nullopt;
+  RobustLine out;
+  out.sigma = 1.4826 * (1.0 + 5.0 / std::max(1, n - 2)) * std::sqrt(best);
+  double const thr = std::max(2.5 * out.sigma, 1.0);
+  std::vector<Eigen::Vector2d> in;
+  for (int m = 0; m < n; ++m)
+    if (std::abs(bl.head<2>().dot(pts[m]) + bl.z()) <= thr) {
+      out.inliers.push_back(m);
+      in.push_back(pts[m]);
+    }
+  auto const ls = in.size() >= 2 ? fitLineLS(in) : std::nullopt;
+  out.line = ls ? *ls : bl;
+  return out;
+}
+
+std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& p) {
+  Eigen::Vector2d const n = line.head<2>();   // toward the shaft
+  Eigen::Vector2d const dir(-n.y(), n.x());
+  Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
+  double const h = p.refine_halfwidth_px, ds = 0.5;
+  int const ns = static_cast<int>(std::lround(2.0 * h / ds)) + 1;
+  std::vector<float> prof(static_cast<std::size_t>(ns));
+  std::vector<Eigen::Vector2d> pts;
+  for (double t = t0; t <= t1; t += p.refine_step_px) {
+    Eigen::Vector2d const base = o + t * dir;
+    bool ok = true;
+    for (int i = 0; i < ns && ok; ++i) {
+      Eigen::Vector2d const q = base + (-h + i * ds) * n;
+      ok = chromaAt(bgr, q.x(), q.y(), &prof[i]);
+    }
+    if (!ok) continue;
+    // Steepest descent of chroma from tissue (s < 0) into the shaft (s > 0), central differences.
+    // (Metal shafts mirror the tissue's colours, so "the first edge seen from inside" is not the
+    // rim: on the in-vivo stills it doubled the line error.)
+    int bi = -1;
+    float bg = -p.min_edge_contrast * static_cast<float>(2.0 * ds);
+    for (int i = 1; i + 1 < ns; ++i) {
+      float const g = prof[i + 1] - prof[i - 1];
+      if (g < bg) {
+        bg = g;
+        bi = i;
+      }
+    }
+    if (bi <= 1 || bi >= ns - 2) continue;  // no edge, or at the end of the profile
+    float const gm = prof[bi] - prof[bi - 2], gp = prof[bi + 2] - prof[bi];
+    float const den = gm - 2.f * bg + gp;
+    double const off = std::abs(den) > 1e-6f ? 0.5 * (gm - gp) / den : 0.0;  // parabola vertex
+    double const s = -h + (bi + std::clamp(off, -1.0, 1.0)) * ds;
+    pts.push_back(base + s * n);
+  }
+  if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
+  // Robust LS: Tukey biweight, scale from the MAD, three passes.
+  std::vector<double> w(pts.size(), 1.0);
+  Eigen::Vector3d l = line;
+  for (int it = 0; it < 3; ++it) {
+    auto const f = fitLineLS(pts, &w);
+    if (!f) return std::nullopt;
+    l = *f;
+    std::vector<double> r(pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i) r[i] = std::abs(l.head<2>().dot(pts[i]) + l.z());
+    std::vector<double> rr = r;
+    std::nth_element(rr.begin(), rr.begin() + rr.size() / 2, rr.end());
+    double const sc = std::max(1.4826 * rr[rr.size() / 2], 0.05);
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      double const u = r[i] / (4.685 * sc);
+      w[i] = u < 1.0 ? (1 - u * u) * (1 - u * u) : 0.0;
+    }
+  }
+  if (l.head<2>().dot(n) < 0.0) l = -l;  // keep the shaft on the positive side
+  RefinedLine out;
+  out.line = l;
+  double sw = 0.0, ss = 0.0, st = 0.0, st2 = 0.0;
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  int used = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    if (w[i] <= 0.0) continue;
+    double const e = l.head<2>().dot(pts[i]) + l.z();
+    ss += w[i] * e * e;
+    sw += w[i];
+    c += w[i] * pts[i];
+    ++used;
+  }
+  if (used < p.min_edge_points || sw <= 0.0) return std::nullopt;
+  c /= sw;
+  Eigen::Vector2d const ld(-l.y(), l.x());
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (w[i] > 0.0) {
+      double const t = ld.dot(pts[i] - c);
+      st += w[i] * t * t;
+      st2 += w[i];
+    }
+  out.residual_px = std::sqrt(ss / sw);
+  out.points = used;
+  double const s2 = std::max(out.residual_px * out.residual_px, 0.01 * 0.01) * used / std::max(1, used - 2);
+  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw), s2 / used);
+  return out;
+}
+
+SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p) {
+  SideFit fit;
+  auto const& B = region.boundary;
+  int const n = static_cast<int>(B.size());
+  auto reject = [&](ContourRejection r) {
+    fit.rejection = r;
+    return fit;
+  };
+  if (n < 2 * p.min_side_points) return reject(ContourRejection::kTooFewPoints);
+  // Boundary points on (near) the FOV edge belong to the entry, not to a contour line.
+  auto onBorder = [&](cv::Point const& q) {
+    int const m = p.border_margin;
+    for (cv::Point const d : {cv::Point(m, 0), cv::Point(-m, 0), cv::Point(0, m), cv::Point(0, -m)}) {
+      cv::Point const r = q + d;
+      if (r.x < 0 || r.y < 0 || r.x >= fov.mask.cols || r.y >= fov.mask.rows || fov.mask.at<std::uint8_t>(r) == 0)
+        return true;
+    }
+    return false;
+  };
+  std::vector<unsigned char> border(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) border[i] = onBorder(B[i]);
+  // Two classes split at the boundary point farthest from the seed.
+  int f = -1;
+  double fd = -1.0;
+  for (int i = 0; i < n; ++i) {
+    if (border[i]) continue;
+    double const d = cv::norm(B[i] - region.seed);
+    if (d > fd) {
+      fd = d;
+      f = i;
+    }
+  }
+  // LMedS per side (processing scale), then the inliers mapped to full resolution.
+  auto fitPair = [&](std::vector<Eigen::Vector2d> (&side)[2], cv::Point const far_pt) -> SideFit {
+    SideFit fit;
+    auto reject = [&](ContourRejection r) {
+      fit.rejection = r;
+      return fit;
+    };
+    if (static_cast<int>(side[0].size()) < p.min_side_points || static_cast<int>(side[1].size()) < p.min_side_points)
+      return reject(ContourRejection::kTooFewPoints);
+    double const off = 0.5 * (scale - 1);
+    auto toFull = [&](double x, double y) { return Eigen::Vector2d(x * scale + off, y * scale + off); };
+    auto& coarse = fit.lines;
+    auto& full = fit.points;
+    for (int s = 0; s < 2; ++s) {
+      auto const rl = fitLineLMedS(side[s], p.lmeds_samples, p.seed + s);
+      if (!rl || rl->inliers.size() < p.min_inlier_fraction * side[s].size() ||
+          static_cast<int>(rl->inliers.size()) < p.min_side_points)
+        return reject(ContourRejection::kNotStraight);
+      fit.inliers += static_cast<int>(rl->inliers.size());
+      for (int i : rl->inliers) full[s].push_back(toFull(side[s][i].x(), side[s][i].y()));
+      auto const l = fitLineLS(full[s]);
+      if (!l) return reject(ContourRejection::kNotStraight);
+      coarse[s] = *l;
+    }
+    double const cosang = std::abs(coarse[0].head<2>().dot(coarse[1].head<2>()));
+    if (cosang < std::cos(p.max_angle_deg * M_PI / 180.0)) return reject(ContourRejection::kNotParallel);
+    // Entry (the seed) and the farthest boundary point, in full resolution.
+    fit.entry = toFull(region.seed.x, region.seed.y);
+    fit.far = toFull(far_pt.x, far_pt.y);
+    // Orient each line with the shaft on its positive side: the mean of all inlier points of both
+    // sides lies between them.
+    Eigen::Vector2d inside = Eigen::Vector2d::Zero();
+    for (int s = 0; s < 2; ++s) {
+      Eigen::Vector2d m = Eigen::Vector2d::Zero();
+      for (auto const& q : full[s]) m += q;
+      inside += 0.5 * m / static_cast<double>(full[s].size());
+    }
+    for (int s = 0; s < 2; ++s)
+      if (coarse[s].head<2>().dot(inside) + coarse[s].z() < 0.0) coarse[s] = -coarse[s];
+    return fit;
+  };
+  // Class split 1 ([Doignon07] Sec. 3): at the boundary point farthest from the seed.
+  std::vector<Eigen::Vector2d> side[2];
+  if (f >= 0)
+    for (int dirn = 0; dirn < 2; ++dirn) {
+      int const step = dirn == 0 ? 1 : -1;
+      for (int k = 1; k < n; ++k) {
+        int const i = ((f + step * k) % n + n) % n;
+        if (border[i]) break;
+        side[dirn].emplace_back(B[i].x, B[i].y);
+      }
+    }
+  SideFit const a = fitPair(side, f >= 0 ? B[f] : region.seed);
+  if (a.rejection == ContourRejection::kNone) return a;
+  // Class split 2 (fallback, when the seed sits badly, e.g. in the vignetting band): by the side
+  // of the region's principal axis, leaving out the far end (the tip cap).
+  cv::Moments const mo = cv::moments(B);
+  if (mo.m00 <= 0.0) return a;
+  Eigen::Vector2d const c(mo.m10 / mo.m00, mo.m01 / mo.m00);
+  double const th = 0.5 * std::atan2(2.0 * mo.mu11, mo.mu20 - mo.mu02);
+  Eigen::Vector2d ax(std::cos(th), std::sin(th));
+  if (ax.dot(c - Eigen::Vector2d(region.seed.x, region.seed.y)) < 0.0) ax = -ax;  // from the seed outward
+  Eigen::Vector2d const nrm(-ax.y(), ax.x());
+  double tmax = -1e300, tmin = 1e300;
+  for (auto const& q : B) {
+    double const t = ax.dot(Eigen::Vector2d(q.x, q.y) - c);
+    tmax = std::max(tmax, t);
+    tmin = std::min(tmin, t);
+  }
+  double const t_cut = tmax - std::max(3.0, 0.1 * (tmax - tmin));  // the tip cap is not a side
+  std::vector<Eigen::Vector2d> side2[2];
+  cv::Point far2 = region.seed;
+  double best_t = -1e300;
+  for (int i = 0; i < n; ++i) {
+    Eigen::Vector2d const q(B[i].x, B[i].y);
+    double const t = ax.dot(q - c);
+    if (t > best_t && !border[i]) {
+      best_t = t;
+      far2 = B[i];
+    }
+    if (border[i] || t > t_cut) continue;
+    side2[nrm.dot(q - c) > 0.0 ? 0 : 1].push_back(q);
+  }
+  SideFit const b2 = fitPair(side2, far2);
+  if (b2.rejection == ContourRejection::kNone) return b2;
+  return a;
+}
+
+ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr,
+                         int scale, ContourLinesParams const& p) {
+  ContourFit fit;
+  auto reject = [&](ContourRejection r) {
+    fit.rejection = r;
+    return fit;
+  };
+  if (sides.rejection != ContourRejection::kNone) return reject(sides.rejection);
+  auto const& coarse = sides.lines;
+  auto const& full = sides.points;
+  Eigen::Vector2d const entry = sides.entry, far = sides.far;
+  auto const& B = region.boundary;
+  double const off = 0.5 * (scale - 1);
+  // Sub-pixel refinement on the full-resolution image, over the extent of the side's inliers
+  // (2 px in from each end).
+  RefinedLine ref[2];
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Vector2d const d(-coarse[s].y(), coarse[s].x());
+    double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+    for (auto const& q : full[s]) {
+      t0 = std::min(t0, d.dot(q));
+      t1 = std::max(t1, d.dot(q));
+    }
+    // Two passes: a wide search (the region boundary can sit several px inside the shaft's
+    // shaded rim), then a narrow one around the refitted line.
+    ContourLinesParams wide = p;
+    wide.refine_halfwidth_px = p.coarse_halfwidth_px;
+    wide.max_residual_px = 1e9;
+    auto const r0 = refineLineSubpixel(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide);
+    if (!r0) return reject(ContourRejection::kWeakEdges);
+    auto const r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p);
+    if (!r) return reject(ContourRejection::kWeakEdges);
+    if (r->residual_px > p.max_residual_px) return reject(ContourRejection::kResidual);
+    ref[s] = *r;
+    fit.edge_points += r->points;
+  }
+  // Order: lines[0] on the left walking from the entry toward the tip (v down).
+  Eigen::Vector2d axis_dir(-(ref[0].line.y() - ref[1].line.y()), ref[0].line.x() - ref[1].line.x());
+  if (axis_dir.norm() < 1e-9) return reject(ContourRejection::kCrossing);
+  axis_dir.normalize();
+  if (axis_dir.dot(far - entry) < 0.0) axis_dir = -axis_dir;
+  Eigen::Vector2d const left(axis_dir.y(), -axis_dir.x());
+  int const L = ref[0].line.head<2>().dot(left) < 0.0 ? 0 : 1;  // normal pointing right: left line
+  if (!(ref[L].line.head<2>().dot(left) < 0.0 && ref[1 - L].line.head<2>().dot(left) > 0.0))
+    return reject(ContourRejection::kCrossing);
+  ApparentContour c;
+  c.lines = {ref[L].line, ref[1 - L].line};
+  c.line_covariances = {ref[L].covariance, ref[1 - L].covariance};
+  c.line_residual_px = {ref[L].residual_px, ref[1 - L].residual_px};
+  c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
+  // Tip: the region point farthest from the entry along the axis direction.
+  double best = -1e300;
+  Eigen::Vector2d tip = far;
+  for (auto const& q : B) {
+    Eigen::Vector2d const x = Eigen::Vector2d(q.x, q.y) * scale + Eigen::Vector2d(off, off);  // full-res
+    double const t = axis_dir.dot(x - entry);
+    if (t > best) {
+      best = t;
+      tip = x;
+    }
+  }
+  c.entry_px = entry;
+  c.tip_px = tip;
+  if ((tip - entry).norm() < p.min_length_px) return reject(ContourRejection::kTooShort);
+  // Width where the shaft is seen: sum of the signed distances at entry and tip (both positive inside).
+  for (Eigen::Vector2d const& q : {entry, tip}) {
+    Eigen::Vector3d const x(q.x(), q.y(), 1.0);
+    double const w = c.lines[0].dot(x) + c.lines[1].dot(x);
+    if (w < p.min_width_px) return reject(ContourRejection::kTooThin);
+  }
+  // A shaft enters the view across its border: its direction (entry -> tip) must point inward,
+  // not along the border (the inward normal is the gradient of the distance to the FOV edge).
+  if (!fov.depth.empty()) {
+    Eigen::Vector2d const ps = (entry - Eigen::Vector2d(off, off)) / scale;
+    int const x = std::clamp(static_cast<int>(std::lround(ps.x())), 3, fov.depth.cols - 4);
+    int const y = std::clamp(static_cast<int>(std::lround(ps.y())), 3, fov.depth.rows - 4);
+    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
+                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
+    if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);
+  }
+  // Shape: a shaft region fills the strip between its lines and stays inside it, and the strip
+  // is elongated. Tissue blobs that happen to have two straight-ish sides fail here.
+  {
+    double const len = (tip - entry).norm();
+    Eigen::Vector3d const em(entry.x(), entry.y(), 1.0), tm(tip.x(), tip.y(), 1.0);
+    double const width = 0.5 * (c.lines[0].dot(em) + c.lines[1].dot(em) + c.lines[0].dot(tm) + c.lines[1].dot(tm));
+    if (len < p.min_elongation * width) return reject(ContourRejection::kNotElongated);
+    // Rasterise at processing scale over the region's box (plus margin).
+    cv::Rect const box = region.box + cv::Size(4, 4) - cv::Point(2, 2);
+    cv::Mat reg = cv::Mat::zeros(box.size(), CV_8U), quad = cv::Mat::zeros(box.size(), CV_8U);
+    std::vector<std::vector<cv::Point>> poly{region.boundary};
+    cv::fillPoly(reg, poly, 255, cv::LINE_8, 0, -box.tl());
+    std::vector<cv::Point> q;
+    for (Eigen::Vector2d const& e : {entry, tip})
+      for (int k = 0; k < 2; ++k) {
+        Eigen::Vector2d const n = c.lines[k].head<2>();
+        Eigen::Vector2d const foot = e - n * c.lines[k].dot(Eigen::Vector3d(e.x(), e.y(), 1.0));
+        Eigen::Vector2d const ps = (foot - Eigen::Vector2d(off, off)) / scale;  // to processing px
+        q.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
+      }
+    std::swap(q[2], q[3]);
+    cv::fillConvexPoly(quad, q, 255);
+    double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg), both = cv::countNonZero(quad & reg);
+    if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < p.min_inside * nr) return reject(ContourRejection::kNotFilled);
+  }
+  fit.contour = c;
+  return fit;
+}
+
+ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr, int scale,
+                              ContourLinesParams const& p) {
+  return refineContour(fitSides(region, fov, scale, p), region, fov, bgr, scale, p);
+}
+
+}  // namespace endo_guidance

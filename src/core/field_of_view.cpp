@@ -1,0 +1,61 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/field_of_view.h"
+
+#include <opencv2/imgproc.hpp>
+
+namespace endo_guidance {
+
+FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
+  CV_Assert(bgr.type() == CV_8UC3);
+  FieldOfView fov;
+  cv::Mat mx;
+  {
+    std::vector<cv::Mat> ch;
+    cv::split(bgr, ch);
+    cv::max(ch[0], ch[1], mx);
+    cv::max(mx, ch[2], mx);
+  }
+  cv::Mat lit;
+  cv::threshold(mx, lit, p.dark_threshold, 255, cv::THRESH_BINARY);
+  cv::morphologyEx(lit, lit, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(lit, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  double best = 0.0;
+  int bi = -1;
+  for (int i = 0; i < static_cast<int>(contours.size()); ++i) {
+    double const a = cv::contourArea(contours[i]);
+    if (a > best) {
+      best = a;
+      bi = i;
+    }
+  }
+  cv::Mat area = cv::Mat::zeros(bgr.size(), CV_8U);
+  double const total = static_cast<double>(bgr.rows) * bgr.cols;
+  std::vector<cv::Point> hull;
+  if (bi >= 0 && best >= p.min_area_fraction * total) {
+    cv::convexHull(contours[bi], hull);
+    cv::fillConvexPoly(area, hull, 255);
+  } else {
+    area.setTo(255);
+  }
+  fov.bounds = cv::boundingRect(area);
+  double const fill = cv::countNonZero(area) / std::max(1.0, static_cast<double>(fov.bounds.area()));
+  fov.circular = fill < 0.9;  // a disc fills pi/4 = 0.785 of its box, a clipped disc a bit more
+  cv::Moments const mo = cv::moments(area, true);
+  fov.centre = mo.m00 > 0 ? cv::Point2f(mo.m10 / mo.m00, mo.m01 / mo.m00) : cv::Point2f(bgr.cols / 2.f, bgr.rows / 2.f);
+  // The image rectangle also bounds the area: erode with a 0 border.
+  cv::Mat er;
+  cv::erode(area, er, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * p.inset + 1, 2 * p.inset + 1}), {-1, -1}, 1,
+            cv::BORDER_CONSTANT, 0);
+  fov.mask = er;
+  cv::distanceTransform(area, fov.depth, cv::DIST_L2, 3);
+  std::vector<std::vector<cv::Point>> c2;
+  cv::findContours(er.clone(), c2, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  std::size_t bj = 0;
+  for (std::size_t i = 1; i < c2.size(); ++i)
+    if (c2[i].size() > c2[bj].size()) bj = i;
+  if (!c2.empty()) fov.border = std::move(c2[bj]);
+  return fov;
+}
+
+}  // namespace endo_guidance

@@ -1,0 +1,56 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/region_growing.h"
+
+#include <opencv2/imgproc.hpp>
+
+namespace endo_guidance {
+
+void RegionGrower::reset(cv::Mat const& feature, FieldOfView const& fov) {
+  CV_Assert(feature.type() == CV_8U && fov.mask.size() == feature.size());
+  feature_ = feature;
+  base_.create(feature.rows + 2, feature.cols + 2, CV_8U);
+  base_.setTo(1);
+  // 0 (free) inside the field of view; floodFill never enters non-zero mask pixels.
+  base_(cv::Rect(1, 1, feature.cols, feature.rows)).setTo(0, fov.mask);
+  labels_ = cv::Mat::zeros(feature.size(), CV_8U);
+}
+
+std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed_index) {
+  if (seed.x < 0 || seed.y < 0 || seed.x >= feature_.cols || seed.y >= feature_.rows) return std::nullopt;
+  int const v = feature_.at<std::uint8_t>(seed);
+  if (v > threshold || claimed(seed)) return std::nullopt;
+  base_.copyTo(scratch_);
+  cv::Rect box;
+  // Fixed range [0, threshold] around the seed value: loDiff = v, upDiff = threshold - v.
+  int const area = cv::floodFill(feature_, scratch_, seed, 255, &box, cv::Scalar(v), cv::Scalar(threshold - v),
+                                 4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
+  Region r;
+  r.seed_index = seed_index;
+  r.threshold = threshold;
+  r.seed = seed;
+  r.box = box;
+  r.area = area;
+  cv::Mat const roi = scratch_(cv::Rect(box.x + 1, box.y + 1, box.width, box.height)) == 2;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(roi, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, box.tl());
+  if (contours.empty()) return std::nullopt;
+  std::size_t bj = 0;
+  for (std::size_t i = 1; i < contours.size(); ++i)
+    if (contours[i].size() > contours[bj].size()) bj = i;
+  r.boundary = std::move(contours[bj]);
+  return r;
+}
+
+void RegionGrower::claim(Region const& r, int label) {
+  // Re-grow into the scratch mask to mark exactly this region.
+  base_.copyTo(scratch_);
+  int const v = feature_.at<std::uint8_t>(r.seed);
+  cv::Rect box;
+  cv::floodFill(feature_, scratch_, r.seed, 255, &box, cv::Scalar(v), cv::Scalar(std::max(0, r.threshold - v)),
+                4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
+  cv::Mat const in = scratch_ == 2;
+  base_.setTo(1, in);
+  labels_.setTo(label, in(cv::Rect(1, 1, feature_.cols, feature_.rows)));
+}
+
+}  // namespace endo_guidance

@@ -1,0 +1,85 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/seed_search.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace endo_guidance {
+
+namespace {
+// Index of the trocar image whose direction from the FOV centre is within the arc of p, or -1.
+int facingTrocar(cv::Point const& p, cv::Point2f const& c, std::vector<Eigen::Vector3d> const& t, double cos_max) {
+  Eigen::Vector2d const v(p.x - c.x, p.y - c.y);
+  if (v.norm() < 1e-9) return -1;
+  int best = -1;
+  double bc = cos_max;
+  for (std::size_t j = 0; j < t.size(); ++j) {
+    Eigen::Vector2d dir;
+    if (std::abs(t[j].z()) > 1e-12) dir = t[j].head<2>() / t[j].z() - Eigen::Vector2d(c.x, c.y);
+    else dir = t[j].head<2>();  // at infinity: its direction
+    if (dir.norm() < 1e-9) continue;
+    double const cs = v.dot(dir) / (v.norm() * dir.norm());
+    if (cs > bc) {
+      bc = cs;
+      best = static_cast<int>(j);
+    }
+  }
+  return best;
+}
+}  // namespace
+
+std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, SeedSearchParams const& p,
+                            std::vector<Eigen::Vector3d> const& trocars) {
+  std::vector<Seed> seeds;
+  int const n = static_cast<int>(fov.border.size());
+  if (n < 8) return seeds;
+  double const cos_max = std::cos(p.near_angle_deg * M_PI / 180.0);
+  // Profile along the border, 3-tap smoothed; per-point threshold (relaxed near trocar arcs).
+  std::vector<float> v(static_cast<std::size_t>(n));
+  std::vector<int> facing(static_cast<std::size_t>(n), -1);
+  std::vector<unsigned char> low(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) v[i] = feature.at<std::uint8_t>(fov.border[i]);
+  for (int i = 0; i < n; ++i) {
+    float const s = (v[(i + n - 1) % n] + 2.f * v[i] + v[(i + 1) % n]) * 0.25f;
+    if (!trocars.empty()) facing[i] = facingTrocar(fov.border[i], fov.centre, trocars, cos_max);
+    low[i] = s <= (facing[i] >= 0 ? p.near_threshold : p.threshold);
+  }
+  // Runs of low values on the closed path: start scanning just after a high value.
+  int start = 0;
+  while (start < n && low[start]) ++start;
+  if (start == n) return seeds;  // the whole border is low: no usable contrast
+  int const max_width = static_cast<int>(p.max_width_fraction * n);
+  for (int k = 0; k < n;) {
+    int const i = (start + k) % n;
+    if (!low[i]) {
+      ++k;
+      continue;
+    }
+    int len = 0;
+    float sum = 0.f;
+    while (k + len < n && low[(start + k + len) % n]) {
+      sum += v[(start + k + len) % n];
+      ++len;
+    }
+    if (len >= p.min_width && len <= max_width) {
+      Seed s;
+      s.begin = i;
+      s.end = (i + len) % n;
+      s.width = len;
+      int const mid = (i + len / 2) % n;
+      s.position = fov.border[mid];
+      s.mean_value = sum / len;
+      s.insertion_point = facing[mid];
+      seeds.push_back(s);
+    }
+    k += len;
+  }
+  // Trocar-facing seeds first, then by contrast.
+  std::stable_sort(seeds.begin(), seeds.end(), [](Seed const& a, Seed const& b) {
+    if ((a.insertion_point >= 0) != (b.insertion_point >= 0)) return a.insertion_point >= 0;
+    return a.mean_value < b.mean_value;
+  });
+  return seeds;
+}
+
+}  // namespace endo_guidance

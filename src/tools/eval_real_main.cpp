@@ -1,0 +1,315 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+//
+// endo_guidance_eval_real: accuracy of the segmentation on the shared real data (never copied
+// into the repository). Skips, saying so, when the data folder is absent (exit 0).
+//
+//   in-vivo stills (EndoVis'15 rigid, OP1+OP2, 80 images 640x480): shaft recall, false shafts per
+//   image, and the distance of each matched shaft's mask boundary to its contour line.
+//   robotic sequences (EndoVis'15 robotic, 720x576): image-axis error against the annotated
+//   shaft axes (ShaftPoint -> EndPoint) on the annotated frames.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <sstream>
+#include <string>
+
+#include "endo_guidance/core/segmentation.h"
+
+namespace fs = std::filesystem;
+using namespace endo_guidance;
+
+namespace {
+
+double pct(std::vector<double> v, double p) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+// The quadrilateral between the two contour lines from the entry to the tip.
+std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {
+  std::vector<cv::Point> poly;
+  for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
+    for (int k = 0; k < 2; ++k) {
+      Eigen::Vector2d const n = c.lines[k].head<2>();
+      Eigen::Vector2d const f = q - n * c.lines[k].dot(Eigen::Vector3d(q.x(), q.y(), 1.0));
+      poly.emplace_back(static_cast<int>(std::lround(f.x())), static_cast<int>(std::lround(f.y())));
+    }
+  std::swap(poly[2], poly[3]);  // entry-left, entry-right, tip-right, tip-left
+  return poly;
+}
+
+struct InvivoStats {
+  int images = 0, shafts = 0, found = 0, detections = 0, false_shafts = 0;
+  std::vector<double> line_median_px;  // per matched shaft: median boundary distance
+  std::vector<double> all_dist_px;
+  std::map<std::string, int> misses;
+};
+
+bool verbose = false;
+
+void evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area) {
+  InvivoStats st;
+  std::vector<fs::path> files;
+  for (std::string op : {"OP1", "OP2"}) {
+    fs::path const raw = root / op / "Raw";
+    if (!fs::exists(raw)) continue;
+    for (auto const& e : fs::directory_iterator(raw)) files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  for (auto const& f : files) {
+    cv::Mat const im = cv::imread(f.string(), cv::IMREAD_COLOR);
+    std::string name = f.filename().string();
+    std::string const base = name.substr(0, name.find("_raw"));
+    cv::Mat const cls = cv::imread((f.parent_path().parent_path() / "Masks" / (base + "_class.png")).string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat const ins = cv::imread((f.parent_path().parent_path() / "Masks" / (base + "_instrument.png")).string(), cv::IMREAD_GRAYSCALE);
+    if (im.empty() || cls.empty() || ins.empty()) {
+      std::fprintf(stderr, "skipping %s: unreadable image or masks\n", f.c_str());
+      continue;
+    }
+    ++st.images;
+    InstrumentSegmenter seg(sp);  // stills: no temporal state
+    SegmentationResult const r = seg.process(im);
+    // Instances: shaft pixels (class 160) of each instrument id.
+    std::map<int, cv::Mat> shafts, whole;
+    for (int y = 0; y < ins.rows; ++y)
+      for (int x = 0; x < ins.cols; ++x) {
+        int const id = ins.at<std::uint8_t>(y, x);
+        if (id == 0) continue;
+        if (!whole.count(id)) {
+          whole[id] = cv::Mat::zeros(ins.size(), CV_8U);
+          shafts[id] = cv::Mat::zeros(ins.size(), CV_8U);
+        }
+        whole[id].at<std::uint8_t>(y, x) = 255;
+        if (cls.at<std::uint8_t>(y, x) == 160) shafts[id].at<std::uint8_t>(y, x) = 255;
+      }
+    std::vector<int> ids;
+    for (auto const& [id, m] : shafts)
+      if (cv::countNonZero(m) >= min_area) ids.push_back(id);
+    st.shafts += static_cast<int>(ids.size());
+    std::map<int, bool> found;
+    for (auto const& c : r.contours) {
+      ++st.detections;
+      cv::Mat det = cv::Mat::zeros(im.size(), CV_8U);
+      cv::fillConvexPoly(det, shaftPolygon(c), 255);
+      double const area = std::max(1, cv::countNonZero(det));
+      int best = -1;
+      double bo = 0.0;
+      for (auto const& [id, m] : whole) {
+        double const o = cv::countNonZero(det & m) / area;
+        if (o > bo) {
+          bo = o;
+          best = id;
+        }
+      }
+      if (best < 0 || bo < 0.5) {
+        ++st.false_shafts;
+        if (verbose)
+          std::printf("  false %s/%s: entry (%.0f %.0f) tip (%.0f %.0f) residual %.2f overlap %.2f\n",
+                      f.parent_path().parent_path().filename().c_str(), base.c_str(), c.entry_px.x(), c.entry_px.y(),
+                      c.tip_px.x(), c.tip_px.y(), c.residual_px, bo);
+        continue;
+      }
+      if (std::find(ids.begin(), ids.end(), best) == ids.end()) continue;  // a tiny instance: neither
+      found[best] = true;
+      // Boundary of the instance's shaft mask, inside the image and the field of view, between
+      // the entry and the tip: each pixel to the nearer contour line.
+      cv::Mat er, bd;
+      cv::erode(shafts[best], er, cv::Mat());
+      bd = shafts[best] & ~er;
+      Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
+      double const len = (c.tip_px - c.entry_px).norm();
+      std::vector<double> d;
+      for (int y = 2; y < bd.rows - 2; ++y)
+        for (int x = 2; x < bd.cols - 2; ++x) {
+          if (!bd.at<std::uint8_t>(y, x)) continue;
+          Eigen::Vector2d const q(x, y);
+          double const t = ax.dot(q - c.entry_px);
+          if (t < 0.05 * len || t > 0.95 * len) continue;
+          Eigen::Vector3d const h(x, y, 1.0);
+          double const e = std::min(std::abs(c.lines[0].dot(h)), std::abs(c.lines[1].dot(h)));
+          if (e > 25.0) continue;  // not this shaft's side (jaws, the other end)
+          d.push_back(e);
+        }
+      if (!d.empty()) {
+        st.line_median_px.push_back(pct(d, 0.5));
+        st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
+      }
+    }
+    for (int id : ids) st.found += found.count(id) ? 1 : 0;
+    // Why each missed shaft was missed: no seed on it, or the fate of the regions grown from it.
+    double const sc = r.scale, so = 0.5 * (r.scale - 1);
+    for (int id : ids) {
+      if (found.count(id)) continue;
+      cv::Mat dil;
+      cv::dilate(whole[id], dil, cv::Mat(), {-1, -1}, 12);
+      std::string why = "no seed";
+      for (std::size_t k = 0; k < r.regions.size(); ++k) {
+        // The region (scaled to full resolution) lies mostly on this instrument.
+        std::vector<cv::Point> poly;
+        for (auto const& q : r.regions[k].boundary)
+          poly.emplace_back(static_cast<int>(q.x * sc + so), static_cast<int>(q.y * sc + so));
+        cv::Mat rm = cv::Mat::zeros(im.size(), CV_8U);
+        cv::fillPoly(rm, std::vector<std::vector<cv::Point>>{poly}, 255);
+        double const a = std::max(1, cv::countNonZero(rm));
+        if (cv::countNonZero(rm & dil) > 0.3 * a) {
+          why = toString(r.region_status[k]);
+          if (r.region_status[k] == ContourRejection::kNone) why = "detected but not matched";
+          break;
+        }
+      }
+      if (why == "no seed")
+        for (auto const& sd : r.seeds) {
+          cv::Point const q(static_cast<int>(sd.position.x * sc + so), static_cast<int>(sd.position.y * sc + so));
+          if (dil.at<std::uint8_t>(q)) why = "seed without region";
+        }
+      st.misses[why]++;
+      if (verbose) std::printf("  miss %s/%s id %d: %s\n", f.parent_path().parent_path().filename().c_str(), base.c_str(), id, why.c_str());
+    }
+    if (verbose) {
+      std::printf("%s/%s: %zu seeds, %zu regions [", f.parent_path().parent_path().filename().c_str(), base.c_str(),
+                  r.seeds.size(), r.regions.size());
+      for (std::size_t i = 0; i < r.regions.size(); ++i)
+        std::printf("%s(t%d,a%d)%s", toString(r.region_status[i]), r.regions[i].threshold, r.regions[i].area,
+                    i + 1 < r.regions.size() ? "; " : "");
+      int nf = 0;
+      for (int id : ids) nf += found.count(id) ? 1 : 0;
+      std::printf("] found %d/%zu\n", nf, ids.size());
+    }
+    if (!overlay_dir.empty()) {
+      cv::Mat ov = im.clone();
+      for (int id : ids) {
+        std::vector<std::vector<cv::Point>> cs;
+        cv::findContours(shafts[id].clone(), cs, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+        cv::drawContours(ov, cs, -1, found.count(id) ? cv::Scalar(0, 200, 0) : cv::Scalar(0, 0, 255), 1);
+      }
+      drawSegmentationOverlay(ov, r);
+      fs::create_directories(overlay_dir);
+      cv::imwrite((fs::path(overlay_dir) / (f.parent_path().parent_path().filename().string() + "_" + base + ".png")).string(), ov);
+    }
+  }
+  std::printf("in-vivo stills (%s): %d images, %d shafts (>= %d px of shaft mask)\n", root.c_str(), st.images, st.shafts, min_area);
+  std::printf("  shafts found      %d / %d = %.1f %%\n", st.found, st.shafts, 100.0 * st.found / std::max(1, st.shafts));
+  std::printf("  false shafts      %d in %d images = %.3f per image (%d detections)\n", st.false_shafts, st.images,
+              static_cast<double>(st.false_shafts) / std::max(1, st.images), st.detections);
+  std::printf("  missed shafts by cause:");
+  for (auto const& [k, v] : st.misses) std::printf(" [%s: %d]", k.c_str(), v);
+  std::printf("\n");
+  std::printf("  contour line to mask boundary: median of per-shaft medians %.2f px, p90 %.2f px; all boundary px: median %.2f px, p95 %.2f px\n",
+              pct(st.line_median_px, 0.5), pct(st.line_median_px, 0.9), pct(st.all_dist_px, 0.5), pct(st.all_dist_px, 0.95));
+}
+
+void evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp) {
+  std::ifstream csv(root / "shaft_axis_annotations.csv");
+  if (!csv) {
+    std::printf("robotic sequences: %s/shaft_axis_annotations.csv absent: skipped\n", root.c_str());
+    return;
+  }
+  struct Ann { int frame; Eigen::Vector2d a, b; };
+  std::map<int, std::vector<Ann>> ann;  // per dataset
+  std::string line;
+  std::getline(csv, line);
+  while (std::getline(csv, line)) {
+    std::stringstream ss(line);
+    std::string tok;
+    std::vector<std::string> t;
+    while (std::getline(ss, tok, ',')) t.push_back(tok);
+    if (t.size() < 7) continue;
+    ann[std::stoi(t[0])].push_back({std::stoi(t[1]), {std::stod(t[3]), std::stod(t[4])}, {std::stod(t[5]), std::stod(t[6])}});
+  }
+  for (auto const& [ds, list] : ann) {
+    fs::path const video = root / ("Dataset" + std::to_string(ds)) / "Video.avi";
+    cv::VideoCapture cap(video.string());
+    if (!cap.isOpened()) {
+      std::printf("robotic dataset %d: cannot open %s: skipped\n", ds, video.c_str());
+      continue;
+    }
+    InstrumentSegmenter seg(sp);
+    std::vector<double> ang, dist;
+    int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0;
+    cv::Mat im;
+    std::map<int, std::vector<Ann>> by_frame;
+    for (auto const& a : list) by_frame[a.frame].push_back(a);
+    int const last = by_frame.rbegin()->first;
+    while (frame <= last && cap.read(im)) {
+      auto it = by_frame.find(frame);
+      if (it != by_frame.end()) {
+        SegmentationResult const r = seg.process(im);
+        ++frames_annot;
+        dets += static_cast<int>(r.contours.size());
+        for (auto const& a : it->second) {
+          ++n;
+          Eigen::Vector2d const da = (a.b - a.a).normalized();
+          double best = 1e9, ba = 0.0;
+          for (auto const& c : r.contours) {
+            // Image axis: the bisector of the two contour lines (their normals point inward).
+            Eigen::Vector3d const axis = c.lines[0] - c.lines[1];
+            Eigen::Vector3d const l = axis / axis.head<2>().norm();
+            double const e = 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1))));
+            Eigen::Vector2d const dl(-l.y(), l.x());
+            double const an = std::acos(std::min(1.0, std::abs(dl.dot(da)))) * 180.0 / M_PI;
+            if (e < best) {
+              best = e;
+              ba = an;
+            }
+          }
+          if (best < 20.0) {
+            ++found;
+            dist.push_back(best);
+            ang.push_back(ba);
+          }
+        }
+        if (!overlay_dir.empty() && frame % 50 == 0) {
+          cv::Mat ov = im.clone();
+          drawSegmentationOverlay(ov, r);
+          for (auto const& a : it->second)
+            cv::line(ov, cv::Point(a.a.x(), a.a.y()), cv::Point(a.b.x(), a.b.y()), {0, 0, 255}, 1);
+          fs::create_directories(overlay_dir);
+          cv::imwrite((fs::path(overlay_dir) / ("robotic" + std::to_string(ds) + "_" + std::to_string(frame) + ".png")).string(), ov);
+        }
+      }
+      ++frame;
+    }
+    std::printf("robotic dataset %d: %d annotated frames, %d annotated shafts, %d found (axis within 20 px) = %.1f %%, "
+                "%.2f detections/frame\n", ds, frames_annot, n, found, 100.0 * found / std::max(1, n),
+                static_cast<double>(dets) / std::max(1, frames_annot));
+    std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
+                pct(dist, 0.5), pct(dist, 0.9), pct(ang, 0.5), pct(ang, 0.9));
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string data = "../shared/data", overlay;
+  int min_area = 1500;
+  bool invivo = true, robotic = true;
+  for (int i = 1; i < argc; ++i) {
+    std::string const a = argv[i];
+    if (a == "--data" && i + 1 < argc) data = argv[++i];
+    else if (a == "--overlay" && i + 1 < argc) overlay = argv[++i];
+    else if (a == "--min-area" && i + 1 < argc) min_area = std::atoi(argv[++i]);
+    else if (a == "--invivo-only") robotic = false;
+    else if (a == "--verbose") verbose = true;
+    else if (a == "--robotic-only") invivo = false;
+    else {
+      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only]\n");
+      return 2;
+    }
+  }
+  if (!fs::exists(data)) {
+    std::printf("SKIPPED: real data folder '%s' absent (it lives in ../shared/data beside the repository)\n", data.c_str());
+    return 0;
+  }
+  SegmentationParams sp;
+  if (invivo) evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area);
+  if (robotic) evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp);
+  return 0;
+}
