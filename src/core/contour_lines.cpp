@@ -116,7 +116,7 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
   Eigen::Vector2d const n = line.head<2>();   // toward the shaft
   Eigen::Vector2d const dir(-n.y(), n.x());
   Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
-  double const h = p.refine_halfwidth_px, ds = 0.5;
+  double const h = p.refine_halfwidth_px, ds = p.profile_step_px;
   int const ns = static_cast<int>(std::lround(2.0 * h / ds)) + 1;
   std::vector<float> prof(static_cast<std::size_t>(ns));
   std::vector<Eigen::Vector2d> pts;
@@ -195,6 +195,52 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
   return out;
 }
 
+namespace {
+
+// A straight side followed from the entry: LMedS on the first part of the chain, then extended
+// point by point while the chain stays on the line (gaps of a few points allowed), so that the
+// side ends where the shaft ends (tip, jaws, or the junction with a touching instrument).
+struct FollowedSide {
+  Eigen::Vector3d line = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector2d> points;
+  int traversed = 0;  ///< chain points up to the last kept one
+};
+
+std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain, ContourLinesParams const& p,
+                                       std::uint64_t seed) {
+  int const n = static_cast<int>(chain.size());
+  if (n < p.min_side_points) return std::nullopt;
+  int const m = std::clamp(n / 3, p.min_side_points, 80);
+  std::vector<Eigen::Vector2d> const head(chain.begin(), chain.begin() + m);
+  auto const rl = fitLineLMedS(head, p.lmeds_samples, seed);
+  if (!rl || rl->inliers.size() < p.min_inlier_fraction * m) return std::nullopt;
+  FollowedSide f;
+  Eigen::Vector3d l = rl->line;
+  double const tol = std::max(2.5 * rl->sigma, 1.0);
+  int misses = 0, last = -1;
+  for (int i = 0; i < n; ++i) {
+    if (std::abs(l.head<2>().dot(chain[i]) + l.z()) <= tol) {
+      f.points.push_back(chain[i]);
+      misses = 0;
+      last = i;
+      if (f.points.size() % 32 == 0)
+        if (auto const ls = fitLineLS(f.points)) l = *ls;  // follow the line as it gets longer
+    } else if (++misses > p.max_gap_points && !f.points.empty()) {
+      break;
+    }
+  }
+  if (static_cast<int>(f.points.size()) < p.min_side_points ||
+      f.points.size() < p.min_inlier_fraction * (last + 1))
+    return std::nullopt;
+  auto const ls = fitLineLS(f.points);
+  if (!ls) return std::nullopt;
+  f.line = *ls;
+  f.traversed = last + 1;
+  return f;
+}
+
+}  // namespace
+
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p) {
   SideFit fit;
   auto const& B = region.boundary;
@@ -216,103 +262,68 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   };
   std::vector<unsigned char> border(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) border[i] = onBorder(B[i]);
-  // Two classes split at the boundary point farthest from the seed.
-  int f = -1;
+  // The two classes ([Doignon07] Sec. 3) are the two boundary chains that leave the entry (the
+  // seed's border run), one along each side; for a lone shaft they meet at the boundary point
+  // farthest from the seed, the paper's split point. Following each side from the entry (rather
+  // than fitting the whole class) keeps the split right when the region also holds the jaws or
+  // a touching instrument beyond the tip.
+  int s0 = 0;
+  double sd = 1e300;
+  for (int i = 0; i < n; ++i) {
+    double const d = cv::norm(B[i] - region.seed) - (border[i] ? 0.5 : 0.0);
+    if (d < sd) {
+      sd = d;
+      s0 = i;
+    }
+  }
+  std::vector<Eigen::Vector2d> chain[2];
+  for (int dirn = 0; dirn < 2; ++dirn) {
+    int const step = dirn == 0 ? 1 : -1;
+    int k = 0;
+    while (k < n && border[((s0 + step * k) % n + n) % n]) ++k;  // leave the entry run
+    for (; k < n; ++k) {
+      int const i = ((s0 + step * k) % n + n) % n;
+      if (border[i]) break;
+      chain[dirn].emplace_back(B[i].x, B[i].y);
+    }
+  }
+  std::optional<FollowedSide> side[2];
+  for (int s = 0; s < 2; ++s) {
+    side[s] = followSide(chain[s], p, p.seed + s);
+    if (!side[s])
+      return reject(static_cast<int>(chain[s].size()) < p.min_side_points ? ContourRejection::kTooFewPoints
+                                                                          : ContourRejection::kNotStraight);
+  }
+  double const off = 0.5 * (scale - 1);
+  auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
+  for (int s = 0; s < 2; ++s) {
+    for (auto const& q : side[s]->points) fit.points[s].push_back(toFull(q));
+    auto const l = fitLineLS(fit.points[s]);
+    if (!l) return reject(ContourRejection::kNotStraight);
+    fit.lines[s] = *l;
+    fit.inliers += static_cast<int>(side[s]->points.size());
+  }
+  if (std::abs(fit.lines[0].head<2>().dot(fit.lines[1].head<2>())) < std::cos(p.max_angle_deg * M_PI / 180.0))
+    return reject(ContourRejection::kNotParallel);
+  fit.entry = toFull(Eigen::Vector2d(region.seed.x, region.seed.y));
+  // The far end: the side point farthest from the entry.
   double fd = -1.0;
-  for (int i = 0; i < n; ++i) {
-    if (border[i]) continue;
-    double const d = cv::norm(B[i] - region.seed);
-    if (d > fd) {
-      fd = d;
-      f = i;
-    }
-  }
-  // LMedS per side (processing scale), then the inliers mapped to full resolution.
-  auto fitPair = [&](std::vector<Eigen::Vector2d> (&side)[2], cv::Point const far_pt) -> SideFit {
-    SideFit fit;
-    auto reject = [&](ContourRejection r) {
-      fit.rejection = r;
-      return fit;
-    };
-    if (static_cast<int>(side[0].size()) < p.min_side_points || static_cast<int>(side[1].size()) < p.min_side_points)
-      return reject(ContourRejection::kTooFewPoints);
-    double const off = 0.5 * (scale - 1);
-    auto toFull = [&](double x, double y) { return Eigen::Vector2d(x * scale + off, y * scale + off); };
-    auto& coarse = fit.lines;
-    auto& full = fit.points;
-    for (int s = 0; s < 2; ++s) {
-      auto const rl = fitLineLMedS(side[s], p.lmeds_samples, p.seed + s);
-      if (!rl || rl->inliers.size() < p.min_inlier_fraction * side[s].size() ||
-          static_cast<int>(rl->inliers.size()) < p.min_side_points)
-        return reject(ContourRejection::kNotStraight);
-      fit.inliers += static_cast<int>(rl->inliers.size());
-      for (int i : rl->inliers) full[s].push_back(toFull(side[s][i].x(), side[s][i].y()));
-      auto const l = fitLineLS(full[s]);
-      if (!l) return reject(ContourRejection::kNotStraight);
-      coarse[s] = *l;
-    }
-    double const cosang = std::abs(coarse[0].head<2>().dot(coarse[1].head<2>()));
-    if (cosang < std::cos(p.max_angle_deg * M_PI / 180.0)) return reject(ContourRejection::kNotParallel);
-    // Entry (the seed) and the farthest boundary point, in full resolution.
-    fit.entry = toFull(region.seed.x, region.seed.y);
-    fit.far = toFull(far_pt.x, far_pt.y);
-    // Orient each line with the shaft on its positive side: the mean of all inlier points of both
-    // sides lies between them.
-    Eigen::Vector2d inside = Eigen::Vector2d::Zero();
-    for (int s = 0; s < 2; ++s) {
-      Eigen::Vector2d m = Eigen::Vector2d::Zero();
-      for (auto const& q : full[s]) m += q;
-      inside += 0.5 * m / static_cast<double>(full[s].size());
-    }
-    for (int s = 0; s < 2; ++s)
-      if (coarse[s].head<2>().dot(inside) + coarse[s].z() < 0.0) coarse[s] = -coarse[s];
-    return fit;
-  };
-  // Class split 1 ([Doignon07] Sec. 3): at the boundary point farthest from the seed.
-  std::vector<Eigen::Vector2d> side[2];
-  if (f >= 0)
-    for (int dirn = 0; dirn < 2; ++dirn) {
-      int const step = dirn == 0 ? 1 : -1;
-      for (int k = 1; k < n; ++k) {
-        int const i = ((f + step * k) % n + n) % n;
-        if (border[i]) break;
-        side[dirn].emplace_back(B[i].x, B[i].y);
+  for (int s = 0; s < 2; ++s)
+    for (auto const& q : fit.points[s])
+      if ((q - fit.entry).norm() > fd) {
+        fd = (q - fit.entry).norm();
+        fit.far = q;
       }
-    }
-  SideFit const a = fitPair(side, f >= 0 ? B[f] : region.seed);
-  if (a.rejection == ContourRejection::kNone) return a;
-  // Class split 2 (fallback, when the seed sits badly, e.g. in the vignetting band): by the side
-  // of the region's principal axis, leaving out the far end (the tip cap).
-  cv::Moments const mo = cv::moments(B);
-  if (mo.m00 <= 0.0) return a;
-  Eigen::Vector2d const c(mo.m10 / mo.m00, mo.m01 / mo.m00);
-  double const th = 0.5 * std::atan2(2.0 * mo.mu11, mo.mu20 - mo.mu02);
-  Eigen::Vector2d ax(std::cos(th), std::sin(th));
-  if (ax.dot(c - Eigen::Vector2d(region.seed.x, region.seed.y)) < 0.0) ax = -ax;  // from the seed outward
-  Eigen::Vector2d const nrm(-ax.y(), ax.x());
-  double tmax = -1e300, tmin = 1e300;
-  for (auto const& q : B) {
-    double const t = ax.dot(Eigen::Vector2d(q.x, q.y) - c);
-    tmax = std::max(tmax, t);
-    tmin = std::min(tmin, t);
+  // Orient each line with the shaft on its positive side: the mean of both sides' points.
+  Eigen::Vector2d inside = Eigen::Vector2d::Zero();
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Vector2d m = Eigen::Vector2d::Zero();
+    for (auto const& q : fit.points[s]) m += q;
+    inside += 0.5 * m / static_cast<double>(fit.points[s].size());
   }
-  double const t_cut = tmax - std::max(3.0, 0.1 * (tmax - tmin));  // the tip cap is not a side
-  std::vector<Eigen::Vector2d> side2[2];
-  cv::Point far2 = region.seed;
-  double best_t = -1e300;
-  for (int i = 0; i < n; ++i) {
-    Eigen::Vector2d const q(B[i].x, B[i].y);
-    double const t = ax.dot(q - c);
-    if (t > best_t && !border[i]) {
-      best_t = t;
-      far2 = B[i];
-    }
-    if (border[i] || t > t_cut) continue;
-    side2[nrm.dot(q - c) > 0.0 ? 0 : 1].push_back(q);
-  }
-  SideFit const b2 = fitPair(side2, far2);
-  if (b2.rejection == ContourRejection::kNone) return b2;
-  return a;
+  for (int s = 0; s < 2; ++s)
+    if (fit.lines[s].head<2>().dot(inside) + fit.lines[s].z() < 0.0) fit.lines[s] = -fit.lines[s];
+  return fit;
 }
 
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr,
@@ -342,6 +353,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     // shaded rim), then a narrow one around the refitted line.
     ContourLinesParams wide = p;
     wide.refine_halfwidth_px = p.coarse_halfwidth_px;
+    wide.profile_step_px = 2.0 * p.profile_step_px;
     wide.max_residual_px = 1e9;
     auto const r0 = refineLineSubpixel(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide);
     if (!r0) return reject(ContourRejection::kWeakEdges);
@@ -365,11 +377,14 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   c.line_covariances = {ref[L].covariance, ref[1 - L].covariance};
   c.line_residual_px = {ref[L].residual_px, ref[1 - L].residual_px};
   c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
-  // Tip: the region point farthest from the entry along the axis direction.
+  // Tip: the region point farthest from the entry along the axis, among those inside the strip
+  // between the lines (not the jaws' spread, nor a touching instrument beyond the tip).
   double best = -1e300;
   Eigen::Vector2d tip = far;
   for (auto const& q : B) {
     Eigen::Vector2d const x = Eigen::Vector2d(q.x, q.y) * scale + Eigen::Vector2d(off, off);  // full-res
+    Eigen::Vector3d const xh(x.x(), x.y(), 1.0);
+    if (c.lines[0].dot(xh) < -scale || c.lines[1].dot(xh) < -scale) continue;
     double const t = axis_dir.dot(x - entry);
     if (t > best) {
       best = t;
@@ -417,11 +432,48 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
       }
     std::swap(q[2], q[3]);
     cv::fillConvexPoly(quad, q, 255);
-    double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg), both = cv::countNonZero(quad & reg);
+    // The nearby slab: the same axial extent, four widths to each side. Region pixels beyond the
+    // tip or far to the side (a touching or crossing instrument) do not count against the shaft.
+    cv::Mat slab = cv::Mat::zeros(box.size(), CV_8U);
+    {
+      Eigen::Vector2d const nrm(-axis_dir.y(), axis_dir.x());
+      double const half = 4.0 * width + 4.0 * scale;
+      std::vector<cv::Point> sp;
+      std::array<Eigen::Vector2d, 4> const corners{Eigen::Vector2d(entry + nrm * half), Eigen::Vector2d(tip + nrm * half),
+                                                    Eigen::Vector2d(tip - nrm * half), Eigen::Vector2d(entry - nrm * half)};
+      for (Eigen::Vector2d const& e : corners) {
+        Eigen::Vector2d const ps = (e - Eigen::Vector2d(off, off)) / scale;
+        sp.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
+      }
+      cv::fillConvexPoly(slab, sp, 255);
+    }
+    double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg & slab), both = cv::countNonZero(quad & reg);
     if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < p.min_inside * nr) return reject(ContourRejection::kNotFilled);
   }
   fit.contour = c;
   return fit;
+}
+
+double scoreSides(SideFit const& sides, cv::Mat const& bgr, ContourLinesParams const& p) {
+  if (sides.rejection != ContourRejection::kNone) return -1.0;
+  ContourLinesParams wide = p;
+  wide.refine_halfwidth_px = p.coarse_halfwidth_px;
+  wide.profile_step_px = 2.0 * p.profile_step_px;
+  wide.refine_step_px = p.score_step_px;
+  wide.min_edge_points = std::max(3, p.min_edge_points / 3);
+  double score = 0.0;
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Vector2d const d(-sides.lines[s].y(), sides.lines[s].x());
+    double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+    for (auto const& q : sides.points[s]) {
+      t0 = std::min(t0, d.dot(q));
+      t1 = std::max(t1, d.dot(q));
+    }
+    auto const r = refineLineSubpixel(bgr, sides.lines[s], t0 + 2.0, t1 - 2.0, wide);
+    if (!r) return -1.0;
+    score += r->points / (1.0 + r->residual_px);
+  }
+  return score;
 }
 
 ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr, int scale,

@@ -41,14 +41,21 @@ std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed
   return r;
 }
 
-void RegionGrower::claim(Region const& r, int label) {
+void RegionGrower::claim(Region const& r, int label, std::vector<cv::Point> const& polygon) {
   // Re-grow into the scratch mask to mark exactly this region.
   base_.copyTo(scratch_);
   int const v = feature_.at<std::uint8_t>(r.seed);
   cv::Rect box;
   cv::floodFill(feature_, scratch_, r.seed, 255, &box, cv::Scalar(v), cv::Scalar(std::max(0, r.threshold - v)),
                 4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
-  cv::Mat const in = scratch_ == 2;
+  cv::Mat in = scratch_ == 2;
+  if (!polygon.empty()) {
+    cv::Mat poly = cv::Mat::zeros(in.size(), CV_8U);
+    std::vector<cv::Point> shifted;
+    for (auto const& q : polygon) shifted.push_back(q + cv::Point(1, 1));
+    cv::fillConvexPoly(poly, shifted, 255);
+    in &= poly;
+  }
   base_.setTo(1, in);
   labels_.setTo(label, in(cv::Rect(1, 1, feature_.cols, feature_.rows)));
 }

@@ -35,47 +35,86 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   double const off = 0.5 * (scale - 1);
   for (auto const& t : trocars) t_small.emplace_back((t.x() - off * t.z()) / scale, (t.y() - off * t.z()) / scale, t.z());
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
+  std::vector<std::pair<cv::Point, int>> levels_now;
   grower_.reset(filtered_, fov_);
   double const max_area = params_.regions.max_area_fraction * cv::countNonZero(fov_.mask);
   for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     Seed const& seed = res.seeds[si];
     if (grower_.claimed(seed.position)) continue;
-    // Grow at each threshold; keep the level whose boundary gives the best accepted line pair
-    // (most sub-pixel edge points per unit of residual).
-    std::optional<Region> best, smallest;
-    ContourFit best_fit;
-    double best_score = -1.0;
+    // Grow at each threshold level; score each level's straight-line pair cheaply and refine the
+    // best ones in full until one is accepted. In a video the level that worked for a shaft
+    // entering here in the last frame is tried first, with its neighbours only.
+    auto const& T = params_.regions.thresholds;
+    std::vector<int> levels;
+    int const remembered = rememberedLevel(seed.position);
+    if (remembered >= 0) {
+      for (int d : {0, -1, 1})
+        if (remembered + d >= 0 && remembered + d < static_cast<int>(T.size())) levels.push_back(remembered + d);
+    } else {
+      for (int i = 0; i < static_cast<int>(T.size()); ++i) levels.push_back(i);
+      }
+    struct Candidate {
+      Region region;
+      SideFit sides;
+      double score;
+      int level;
+    };
+    std::vector<Candidate> cands;
+    std::optional<Region> smallest;
     ContourRejection why = ContourRejection::kTooFewPoints;
-    for (int t : params_.regions.thresholds) {
-      auto r = grower_.grow(seed.position, t, si);
+    for (int li : levels) {
+      auto r = grower_.grow(seed.position, T[li], si);
       if (!r) continue;
-      if (r->area > max_area) break;  // leaked into tissue: higher thresholds only leak more
-      if (!smallest) smallest = r;
+      if (r->area > max_area) {
+        if (remembered < 0) break;  // leaked into tissue: higher thresholds only leak more
+        continue;
+      }
+      if (!smallest || r->area < smallest->area) smallest = r;
       if (r->area < params_.regions.min_area) continue;
-      SideFit const sf = fitSides(*r, fov_, scale, params_.contours);
-      if (sf.rejection != ContourRejection::kNone) {
-        why = sf.rejection;
+      SideFit sf = fitSides(*r, fov_, scale, params_.contours);
+      double const score = scoreSides(sf, bgr, params_.contours);
+      if (score < 0.0) {
+        why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
         continue;
       }
-      ContourFit f = refineContour(sf, *r, fov_, bgr, scale, params_.contours);
-      if (!f.contour) {
-        why = f.rejection;
-        continue;
-      }
-      double const score = f.edge_points / (1.0 + f.contour->residual_px);
-      if (score > best_score) {
-        best_score = score;
-        best = std::move(r);
-        best_fit = std::move(f);
-      }
+      cands.push_back({std::move(*r), std::move(sf), score, li});
     }
+    std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
+    std::optional<Region> best;
+    ContourFit best_fit;
+    int best_level = -1;
+    for (auto& cd : cands) {
+      ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
+      if (f.contour) {
+        best = std::move(cd.region);
+        best_fit = std::move(f);
+        best_level = cd.level;
+        break;
+      }
+      why = f.rejection;
+    }
+    if (best) levels_now.emplace_back(seed.position, best_level);
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;
     res.regions.push_back(*keep);
     res.region_status.push_back(best ? ContourRejection::kNone : why);
-    // Claimed either way, so the other seeds of this blob are skipped.
-    grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255);
+    // Claimed either way, so the other seeds of this blob are skipped; an accepted shaft claims
+    // only its strip (widened by 2 px), so a touching instrument's seed still grows.
+    std::vector<cv::Point> strip;
+    if (best) {
+      ApparentContour const& c = *best_fit.contour;
+      double const off = 0.5 * (scale - 1);
+      Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
+      for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
+        for (int k = 0; k < 2; ++k) {
+          Eigen::Vector2d const n = c.lines[k].head<2>();
+          Eigen::Vector2d const f = e - n * (c.lines[k].dot(Eigen::Vector3d(e.x(), e.y(), 1.0)) + 2.0 * scale);
+          strip.emplace_back(static_cast<int>(std::lround((f.x() - off) / scale)), static_cast<int>(std::lround((f.y() - off) / scale)));
+        }
+      std::swap(strip[2], strip[3]);
+    }
+    grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
     if (best) {
       ApparentContour c = *best_fit.contour;
       c.insertion_point_id = seed.insertion_point;
@@ -83,7 +122,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
   }
   labels_ = grower_.labels();
+  last_levels_ = std::move(levels_now);
   return res;
+}
+
+int InstrumentSegmenter::rememberedLevel(cv::Point const& seed) const {
+  for (auto const& [p, level] : last_levels_)
+    if (std::abs(p.x - seed.x) + std::abs(p.y - seed.y) <= params_.level_memory_px) return level;
+  return -1;
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {

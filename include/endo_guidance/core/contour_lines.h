@@ -22,9 +22,12 @@ struct ContourLinesParams {
   double min_length_px = 30.0;    ///< full-res: entry to tip
   double min_width_px = 3.0;      ///< full-res: shaft width at entry and tip
   int lmeds_samples = 60;         ///< random pairs per side
+  int max_gap_points = 6;         ///< a side ends after this many consecutive boundary points off its line
   double refine_step_px = 2.0;    ///< full-res: spacing of the edge profiles along a line
   double refine_halfwidth_px = 3.5;  ///< full-res: half length of each profile across the line (final pass)
   double coarse_halfwidth_px = 9.0;  ///< full-res: the same for the first, wide pass
+  double profile_step_px = 0.5;   ///< full-res: sampling along each profile (the wide pass uses 2x)
+  double score_step_px = 6.0;     ///< full-res: profile spacing when scoring candidate regions
   double min_edge_contrast = 2.5; ///< chroma units per px: weaker profiles carry no edge
   int min_edge_points = 8;        ///< sub-pixel edge points per line
   double max_residual_px = 3.0;   ///< RMS of the sub-pixel edge points to their line
@@ -86,6 +89,9 @@ struct SideFit {
   ContourRejection rejection = ContourRejection::kNone;
 };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+/// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge
+/// pass per side; (edge points) / (1 + RMS residual), or -1 when a side has no edge.
+double scoreSides(SideFit const& sides, cv::Mat const& bgr_full, ContourLinesParams const& params);
 /// The second half: sub-pixel lines, order, tip and the length/width checks.
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full,
                          int scale, ContourLinesParams const& params);

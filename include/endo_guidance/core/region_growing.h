@@ -38,8 +38,10 @@ class RegionGrower {
   void reset(cv::Mat const& feature, FieldOfView const& fov);
   /// The region of `seed` at `threshold`; nullopt if the seed is above it or already claimed.
   std::optional<Region> grow(cv::Point seed, int threshold, int seed_index = -1);
-  /// Marks a region as taken (later seeds inside it are skipped; it is drawn in labels()).
-  void claim(Region const& r, int label);
+  /// Marks a region as taken (later seeds inside it are skipped; it is drawn in labels()). With a
+  /// polygon (processing px), only the region's pixels inside it are taken: an accepted shaft
+  /// claims its own strip, not the touching instrument that grew into the same region.
+  void claim(Region const& r, int label, std::vector<cv::Point> const& polygon = {});
   bool claimed(cv::Point p) const { return base_.at<std::uint8_t>(p.y + 1, p.x + 1) != 0; }
   /// Label image (CV_8U, feature size): 0 = none, k = k-th claimed region.
   cv::Mat const& labels() const { return labels_; }

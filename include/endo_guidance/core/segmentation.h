@@ -20,6 +20,7 @@ struct SegmentationParams {
   int sigma_radius = 1;           ///< Sigma filter window radius (processing px)
   int sigma_delta = 10;           ///< Sigma filter range (feature units)
   int fov_refresh = 25;           ///< frames between field-of-view detections (it rarely changes)
+  int level_memory_px = 8;        ///< processing px: a seed this close to last frame's entry reuses its level
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
@@ -59,7 +60,9 @@ class InstrumentSegmenter {
   FieldOfView fov_;
   cv::Size fov_size_;
   int frames_since_fov_ = 0;
+  int rememberedLevel(cv::Point const& seed) const;
   RegionGrower grower_;
+  std::vector<std::pair<cv::Point, int>> last_levels_;  // entry (processing px) -> threshold level
   cv::Mat small_, raw_, filtered_, labels_;
 };
 

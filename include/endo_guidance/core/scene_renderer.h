@@ -1,0 +1,42 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "endo_guidance/core/synthetic_scene.h"
+
+namespace endo_guidance {
+
+struct RenderOptions {
+  bool black_shafts = false;     ///< black insulated shafts instead of grey metal
+  bool circular_fov = false;     ///< circular endoscope field of view with black surround
+  bool gauze = false;            ///< a grey, gauze-like blob on the tissue (a distractor)
+  bool membranes = true;         ///< whitish, low-chroma membranes on the tissue
+  bool specular = true;          ///< specular highlights on tissue and shafts
+  double noise_sigma = 0.0;      ///< additive Gaussian noise, grey levels
+  int jpeg_quality = 0;          ///< 0: none; else JPEG round trip at this quality
+  std::uint64_t seed = 3;
+};
+
+/// Renders the synthetic scene (one renderer for the tests, the simulator and the demo bags):
+/// textured red/yellow tissue, then each visible instrument far to near: a shaded cylinder
+/// (Lambert + specular stripe across the shaft, exact anti-aliased silhouette from the true
+/// apparent contour, so the ground-truth lines are the image's real edges) ending at the tip,
+/// and two jaws beyond it. Optional circular field of view, gauze, noise and JPEG.
+class SceneRenderer {
+ public:
+  SceneRenderer(int width, int height, RenderOptions const& options = {});
+  /// BGR image of the given views (from SyntheticScene::frame), frame index k for animation.
+  cv::Mat render(std::vector<SyntheticView> const& views, int k = 0) const;
+  RenderOptions const& options() const { return options_; }
+
+ private:
+  int width_, height_;
+  RenderOptions options_;
+  cv::Mat tissue_;  // CV_32FC3, BGR 0..255
+  cv::Mat fov_;     // CV_32F coverage of the field of view
+};
+
+}  // namespace endo_guidance
