@@ -141,10 +141,21 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
       }
     }
     if (bi <= 1 || bi >= ns - 2) continue;  // no edge, or at the end of the profile
-    float const gm = prof[bi] - prof[bi - 2], gp = prof[bi + 2] - prof[bi];
-    float const den = gm - 2.f * bg + gp;
-    double const off = std::abs(den) > 1e-6f ? 0.5 * (gm - gp) / den : 0.0;  // parabola vertex
-    double const s = -h + (bi + std::clamp(off, -1.0, 1.0)) * ds;
+    // Centroid of the slope (tissue -> shaft descents only) in a fixed window of +-2.5 px about
+    // its peak: exact for a box-filtered (anti-aliased) step under bilinear sampling, unbiased
+    // for any symmetric blur; a parabola on the peak, or a lobe cut at a fraction of it, is
+    // biased by up to 0.15 px on sharp edges.
+    double sw = 0.0, swx = 0.0;
+    int const wr = static_cast<int>(std::lround(2.5 / ds));
+    if (bi - wr < 1 || bi + wr > ns - 2) continue;  // the window would be cut: the centroid would be biased
+    for (int i = bi - wr; i <= bi + wr; ++i) {
+      double const g = -(prof[i + 1] - prof[i - 1]);
+      if (g <= 0.0) continue;
+      sw += g;
+      swx += g * i;
+    }
+    if (!(sw > 0.0)) continue;
+    double const s = -h + (swx / sw) * ds;
     pts.push_back(base + s * n);
   }
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
@@ -379,13 +390,22 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
   // Tip: the region point farthest from the entry along the axis, among those inside the strip
   // between the lines (not the jaws' spread, nor a touching instrument beyond the tip).
+  // Beyond the end of the straight sides only the jaws may follow (up to 2.5 widths), not a
+  // gauze or tissue blob that the region ran into.
+  double t_sides = 0.0;
+  for (int s = 0; s < 2; ++s)
+    for (auto const& q : full[s]) t_sides = std::max(t_sides, axis_dir.dot(q - entry));
+  Eigen::Vector2d const end = entry + t_sides * axis_dir;
+  double const end_width = c.lines[0].dot(Eigen::Vector3d(end.x(), end.y(), 1.0)) + c.lines[1].dot(Eigen::Vector3d(end.x(), end.y(), 1.0));
+  double const t_limit = t_sides + 2.5 * std::max(end_width, 2.0 * scale);
   double best = -1e300;
-  Eigen::Vector2d tip = far;
+  Eigen::Vector2d tip = end;
   for (auto const& q : B) {
     Eigen::Vector2d const x = Eigen::Vector2d(q.x, q.y) * scale + Eigen::Vector2d(off, off);  // full-res
     Eigen::Vector3d const xh(x.x(), x.y(), 1.0);
     if (c.lines[0].dot(xh) < -scale || c.lines[1].dot(xh) < -scale) continue;
     double const t = axis_dir.dot(x - entry);
+    if (t > t_limit) continue;
     if (t > best) {
       best = t;
       tip = x;

@@ -79,7 +79,16 @@ void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d con
   E << e1, e2;
   Eigen::Matrix2d S2 = E.transpose() * Sr * E;
   S2.diagonal().array() += 1e-12;  // floor: 1 um
-  Eigen::Matrix3d const W = E * S2.inverse() * E.transpose();
+  Eigen::Matrix3d W = E * S2.inverse() * E.transpose();
+  // Huber weight on the normalised residual at the current estimate: a wrong axis that passed
+  // the gate (a mis-segmented region) pulls with a bounded force.
+  if (initialized_ && estimate_.ok() && options_.huber_k > 0.0) {
+    Eigen::Vector4d xt;
+    xt << estimate_.position - origin_, 1.0;
+    Eigen::Vector3d const r = Bk * xt;
+    double const chi = std::sqrt(std::max(0.0, r.dot(W * r)));
+    if (chi > options_.huber_k) W *= options_.huber_k / chi;
+  }
   Bw_ = rho_ * Bw_ + Bk.transpose() * W * Bk;
   Bu_ = rho_ * Bu_ + Bk.transpose() * Bk;
   sw_ = rho_ * sw_ + 1.0;

@@ -15,7 +15,12 @@
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/insertion_point_image.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
+#include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/synthetic_scene.h"
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
 
 using namespace endo_guidance;
 
@@ -27,7 +32,10 @@ void usage() {
       "  --noise PX     sigma of the contour-line endpoints, pixels (default 0.5)\n"
       "  --breathing M  peak trocar motion, metres (default 0.002)\n"
       "  --seed S       noise seed (default 42)\n"
-      "  --check TOL_M  exit 1 unless every trocar is found within TOL_M of its mean position");
+      "  --check TOL_M  exit 1 unless every trocar is found within TOL_M of its mean position\n"
+      "  --write-sequence DIR  render the sequence instead: DIR/frames/NNNNNN.png, DIR/camera.yaml\n"
+      "                 (ROS camera_info YAML) and DIR/truth.yaml (mean trocars, metres)\n"
+      "  --scene clean|hard|black_circular  rendering for --write-sequence (default clean)");
 }
 }  // namespace
 
@@ -35,6 +43,7 @@ int main(int argc, char** argv) {
   int frames = 500;
   double noise = 0.5, breathing = 0.002, check = -1.0;
   unsigned long seed = 42;
+  std::string write_dir, scene_name = "clean";
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
     auto next = [&](char const* name) -> char const* {
@@ -49,6 +58,8 @@ int main(int argc, char** argv) {
     else if (a == "--breathing") breathing = std::atof(next("--breathing"));
     else if (a == "--seed") seed = std::strtoul(next("--seed"), nullptr, 10);
     else if (a == "--check") check = std::atof(next("--check"));
+    else if (a == "--write-sequence") write_dir = next("--write-sequence");
+    else if (a == "--scene") scene_name = next("--scene");
     else if (a == "-h" || a == "--help") {
       usage();
       return 0;
@@ -68,6 +79,47 @@ int main(int argc, char** argv) {
   so.breathing_amplitude = breathing;
   so.seed = seed;
   SyntheticScene scene(defaultInstruments(), so);
+  if (!write_dir.empty()) {
+    // The embedded default sequence of the README's main command.
+    RenderOptions ro;
+    if (scene_name == "hard") {
+      ro.gauze = true;
+      ro.noise_sigma = 4.0;
+      ro.jpeg_quality = 80;
+    } else if (scene_name == "black_circular") {
+      ro.black_shafts = true;
+      ro.circular_fov = true;
+    } else if (scene_name != "clean") {
+      std::fprintf(stderr, "unknown scene '%s'\n", scene_name.c_str());
+      return 2;
+    }
+    namespace fs = std::filesystem;
+    fs::create_directories(fs::path(write_dir) / "frames");
+    SceneRenderer renderer(so.width, so.height, ro);
+    for (int k = 0; k < frames; ++k) {
+      char name[32];
+      std::snprintf(name, sizeof name, "%06d.png", k);
+      cv::imwrite((fs::path(write_dir) / "frames" / name).string(), renderer.render(scene.frame(k), k));
+    }
+    std::ofstream cam(fs::path(write_dir) / "camera.yaml");
+    Eigen::Matrix3d const& K = so.K;
+    cam << "image_width: " << so.width << "\nimage_height: " << so.height << "\ncamera_name: endo_guidance_synthetic\n"
+        << "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [" << K(0, 0) << ", 0, " << K(0, 2) << ", 0, " << K(1, 1) << ", "
+        << K(1, 2) << ", 0, 0, 1]\n"
+        << "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0, 0, 0, 0, 0]\n"
+        << "rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n"
+        << "projection_matrix:\n  rows: 3\n  cols: 4\n  data: [" << K(0, 0) << ", 0, " << K(0, 2) << ", 0, 0, " << K(1, 1)
+        << ", " << K(1, 2) << ", 0, 0, 0, 1, 0]\n";
+    std::ofstream truth(fs::path(write_dir) / "truth.yaml");
+    truth << "# mean trocar positions, camera optical frame, metres\ntrocars:\n";
+    for (std::size_t i = 0; i < scene.size(); ++i) {
+      Eigen::Vector3d const& T = scene.meanTrocar(static_cast<int>(i));
+      truth << "  - [" << T.x() << ", " << T.y() << ", " << T.z() << "]\n";
+    }
+    truth << "radius: " << defaultInstruments()[0].radius << "\n";
+    std::printf("wrote %d frames (%s scene) with camera.yaml and truth.yaml to %s\n", frames, scene_name.c_str(), write_dir.c_str());
+    return 0;
+  }
   InsertionPointSet set;
 
   std::printf("endo_guidance synthetic sequence: %d frames %dx%d, %zu instruments, line noise %.2f px, "

@@ -24,6 +24,7 @@ struct InsertionPointTrackerOptions {
   double gate_sigmas = 4.0;
   double gate_max = 0.025;           ///< metres: the gate never widens beyond this
   std::size_t reinit_after = 40;     ///< consecutive outliers that trigger a robust re-initialisation
+  double huber_k = 2.5;              ///< Huber threshold on the normalised residual (0: off)
   int reweight_iterations = 3;       ///< Gauss-Markov reweighting passes when (re)initialising
   RobustIntersectOptions robust;
 };

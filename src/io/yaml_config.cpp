@@ -1,0 +1,119 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/io/yaml_config.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <functional>
+#include <map>
+#include <stdexcept>
+
+namespace endo_guidance::io {
+
+bool CameraModel::hasDistortion() const {
+  for (double d : D)
+    if (d != 0.0) return true;
+  return false;
+}
+
+Eigen::Matrix3d CameraModel::rectifiedK() const {
+  if (P(0, 0) > 0.0 && P(1, 1) > 0.0) return P.leftCols<3>();
+  return K;
+}
+
+namespace {
+std::vector<double> matrixData(YAML::Node const& n, std::string const& key, std::size_t expect) {
+  YAML::Node const m = n[key];
+  if (!m || !m["data"]) throw std::runtime_error("camera YAML: missing '" + key + ".data'");
+  auto v = m["data"].as<std::vector<double>>();
+  if (expect && v.size() != expect)
+    throw std::runtime_error("camera YAML: '" + key + ".data' has " + std::to_string(v.size()) + " values, expected " +
+                             std::to_string(expect));
+  return v;
+}
+}  // namespace
+
+CameraModel loadCameraYaml(std::string const& path) {
+  YAML::Node n;
+  try {
+    n = YAML::LoadFile(path);
+  } catch (std::exception const& e) {
+    throw std::runtime_error("cannot read camera YAML '" + path + "': " + e.what());
+  }
+  CameraModel c;
+  if (!n["image_width"] || !n["image_height"]) throw std::runtime_error("camera YAML: missing image_width/image_height");
+  c.width = n["image_width"].as<int>();
+  c.height = n["image_height"].as<int>();
+  auto const k = matrixData(n, "camera_matrix", 9);
+  for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = k[static_cast<std::size_t>(i)];
+  if (n["distortion_model"]) c.distortion_model = n["distortion_model"].as<std::string>();
+  if (n["distortion_coefficients"]) c.D = matrixData(n, "distortion_coefficients", 0);
+  if (n["projection_matrix"]) {
+    auto const p = matrixData(n, "projection_matrix", 12);
+    for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = p[static_cast<std::size_t>(i)];
+  }
+  if (c.width <= 0 || c.height <= 0) throw std::runtime_error("camera YAML: image size must be positive");
+  if (!(c.K(0, 0) > 0.0) || !(c.K(1, 1) > 0.0) || !c.K.allFinite())
+    throw std::runtime_error("camera YAML: camera_matrix has a zero or invalid focal length");
+  if (c.distortion_model != "plumb_bob" && c.distortion_model != "rational_polynomial" && c.hasDistortion())
+    throw std::runtime_error("camera YAML: unsupported distortion model '" + c.distortion_model + "'");
+  return c;
+}
+
+void loadPipelineYaml(std::string const& path, PipelineParams& p) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (std::exception const& e) {
+    throw std::runtime_error("cannot read parameters YAML '" + path + "': " + e.what());
+  }
+  // key -> setter. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
+  using Setter = std::function<void(YAML::Node const&)>;
+  auto d = [](double& x) { return Setter([&x](YAML::Node const& n) { x = n.as<double>(); }); };
+  auto i = [](int& x) { return Setter([&x](YAML::Node const& n) { x = n.as<int>(); }); };
+  auto b = [](bool& x) { return Setter([&x](YAML::Node const& n) { x = n.as<bool>(); }); };
+  auto z = [](std::size_t& x) { return Setter([&x](YAML::Node const& n) { x = n.as<std::size_t>(); }); };
+  auto& S = p.segmentation;
+  auto& T = p.insertion_points;
+  std::map<std::string, Setter> const keys{
+      {"radius", d(p.radius)},
+      {"reject_unattached", b(p.reject_unattached)},
+      {"segmentation/processing_width", i(S.processing_width)},
+      {"segmentation/hue_origin_deg", d(S.feature.hue_origin_deg)},
+      {"segmentation/sigma_radius", i(S.sigma_radius)},
+      {"segmentation/sigma_delta", i(S.sigma_delta)},
+      {"segmentation/fov_dark_threshold", i(S.fov.dark_threshold)},
+      {"segmentation/seed_threshold", i(S.seeds.threshold)},
+      {"segmentation/seed_near_threshold", i(S.seeds.near_threshold)},
+      {"segmentation/grow_thresholds", Setter([&S](YAML::Node const& n) { S.regions.thresholds = n.as<std::vector<int>>(); })},
+      {"segmentation/max_regions", i(S.regions.max_regions)},
+      {"segmentation/max_angle_deg", d(S.contours.max_angle_deg)},
+      {"segmentation/min_length_px", d(S.contours.min_length_px)},
+      {"segmentation/max_residual_px", d(S.contours.max_residual_px)},
+      {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
+      {"segmentation/min_fill", d(S.contours.min_fill)},
+      {"segmentation/min_elongation", d(S.contours.min_elongation)},
+      {"pose/min_distance", d(p.pose.min_distance)},
+      {"pose/max_distance", d(p.pose.max_distance)},
+      {"insertion_points/max_points", i(T.max_points)},
+      {"insertion_points/attach_distance", d(T.attach_distance)},
+      {"insertion_points/memory_views", d(T.tracker.memory_views)},
+      {"insertion_points/min_views", z(T.tracker.min_views)},
+      {"insertion_points/min_conditioning", d(T.tracker.min_conditioning)},
+      {"insertion_points/point_motion_sigma", d(T.tracker.point_motion_sigma)},
+      {"insertion_points/gate_max", d(T.tracker.gate_max)},
+  };
+  std::string unknown;
+  std::function<void(YAML::Node const&, std::string const&)> walk = [&](YAML::Node const& n, std::string const& prefix) {
+    for (auto const& kv : n) {
+      std::string const key = prefix.empty() ? kv.first.as<std::string>() : prefix + "/" + kv.first.as<std::string>();
+      auto const it = keys.find(key);
+      if (it != keys.end()) it->second(kv.second);
+      else if (kv.second.IsMap()) walk(kv.second, key);
+      else unknown += " " + key;
+    }
+  };
+  walk(root, "");
+  if (!unknown.empty()) throw std::runtime_error("parameters YAML '" + path + "': unknown keys:" + unknown);
+}
+
+}  // namespace endo_guidance::io

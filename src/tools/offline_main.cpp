@@ -1,0 +1,426 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+//
+// endo_guidance_offline: the whole per-frame pipeline (segmentation -> contour lines -> cylinder
+// pose -> insertion points -> attachment) on image files, image directories, videos or bags,
+// without a ROS master. One JSON object per frame (README, "Offline program").
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
+#include <unistd.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cv_bridge/cv_bridge.h>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/io/yaml_config.h"
+
+namespace fs = std::filesystem;
+using namespace endo_guidance;
+
+namespace {
+
+void usage(std::FILE* f) {
+  std::fprintf(f,
+               "usage: endo_guidance_offline [--camera CAMERA.yaml] --radius METRES [--params PARAMS.yaml]\n"
+               "                             [--output OUT.jsonl] [--overlay DIR|VIDEO] [--image-topic TOPIC]\n"
+               "                             [--fps HZ] [--truth TRUTH.yaml] [--quiet] INPUT...\n"
+               "  INPUT: image files, a directory of images (sorted by name), a video file, or a bag\n"
+               "         (--image-topic; its camera_info is used when present).\n"
+               "  CAMERA.yaml: ROS camera_info YAML (camera_calibration_parsers format); distorted\n"
+               "         images are rectified first and the contours are given in rectified pixels.\n"
+               "  --output: one JSON object per frame (default: standard output).\n"
+               "  --overlay: a directory (one PNG per frame) or a video file (.avi/.mp4/.mkv).\n"
+               "  --fps: time stamps of image files (default 25).\n"
+               "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n");
+}
+
+// ------------------------------------------------------------------ frame sources
+struct Frame {
+  cv::Mat image;
+  std::string source;
+  double stamp = 0.0;
+  std::string error;
+};
+
+class Source {
+ public:
+  virtual ~Source() = default;
+  virtual bool next(Frame& f) = 0;  // false at the end
+  virtual std::optional<io::CameraModel> camera() const { return std::nullopt; }
+  virtual long size() const { return -1; }
+};
+
+class ImageFiles : public Source {
+ public:
+  ImageFiles(std::vector<std::string> files, double fps) : files_(std::move(files)), fps_(fps) {}
+  bool next(Frame& f) override {
+    if (i_ >= files_.size()) return false;
+    f = Frame{};
+    f.source = files_[i_];
+    f.stamp = static_cast<double>(i_) / fps_;
+    f.image = cv::imread(files_[i_], cv::IMREAD_COLOR);
+    if (f.image.empty()) f.error = "unreadable image";
+    ++i_;
+    return true;
+  }
+  long size() const override { return static_cast<long>(files_.size()); }
+
+ private:
+  std::vector<std::string> files_;
+  double fps_;
+  std::size_t i_ = 0;
+};
+
+class Video : public Source {
+ public:
+  explicit Video(std::string const& path) : path_(path), cap_(path) {
+    if (!cap_.isOpened()) throw std::runtime_error("cannot open video '" + path + "'");
+  }
+  bool next(Frame& f) override {
+    f = Frame{};
+    if (!cap_.read(f.image)) return false;
+    f.source = path_ + "#" + std::to_string(k_++);
+    f.stamp = cap_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+    return true;
+  }
+  long size() const override { return static_cast<long>(cap_.get(cv::CAP_PROP_FRAME_COUNT)); }
+
+ private:
+  std::string path_;
+  cv::VideoCapture cap_;
+  long k_ = 0;
+};
+
+class Bag : public Source {
+ public:
+  Bag(std::string const& path, std::string const& topic) : path_(path) {
+    bag_.open(path, rosbag::bagmode::Read);
+    view_ = std::make_unique<rosbag::View>(bag_, rosbag::TopicQuery(std::vector<std::string>{topic}));
+    if (view_->size() == 0) throw std::runtime_error("bag '" + path + "' has no messages on '" + topic + "'");
+    it_ = view_->begin();
+    // camera_info: <namespace of the image topic>/camera_info
+    std::string const info = topic.substr(0, topic.find_last_of('/')) + "/camera_info";
+    rosbag::View iv(bag_, rosbag::TopicQuery(std::vector<std::string>{info}));
+    for (auto const& m : iv) {
+      auto const ci = m.instantiate<sensor_msgs::CameraInfo>();
+      if (!ci) continue;
+      io::CameraModel c;
+      c.width = static_cast<int>(ci->width);
+      c.height = static_cast<int>(ci->height);
+      for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = ci->K[i];
+      for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = ci->P[i];
+      c.D = ci->D;
+      c.distortion_model = ci->distortion_model;
+      if (c.K(0, 0) > 0.0 && c.K(1, 1) > 0.0 && c.width > 0 && c.height > 0) camera_ = c;
+      break;
+    }
+  }
+  bool next(Frame& f) override {
+    if (it_ == view_->end()) return false;
+    f = Frame{};
+    rosbag::MessageInstance const& m = *it_;
+    f.stamp = m.getTime().toSec();
+    f.source = path_ + "#" + std::to_string(k_++);
+    try {
+      if (auto const img = m.instantiate<sensor_msgs::Image>()) {
+        f.stamp = img->header.stamp.toSec();
+        f.image = cv_bridge::toCvCopy(img, "bgr8")->image;
+      } else if (auto const cimg = m.instantiate<sensor_msgs::CompressedImage>()) {
+        f.stamp = cimg->header.stamp.toSec();
+        f.image = cv::imdecode(cimg->data, cv::IMREAD_COLOR);
+        if (f.image.empty()) f.error = "undecodable compressed image";
+      } else {
+        f.error = "message is neither sensor_msgs/Image nor CompressedImage";
+      }
+    } catch (std::exception const& e) {
+      f.error = std::string("image conversion failed: ") + e.what();
+    }
+    ++it_;
+    return true;
+  }
+  std::optional<io::CameraModel> camera() const override { return camera_; }
+  long size() const override { return static_cast<long>(view_->size()); }
+
+ private:
+  std::string path_;
+  rosbag::Bag bag_;
+  std::unique_ptr<rosbag::View> view_;
+  rosbag::View::iterator it_;
+  std::optional<io::CameraModel> camera_;
+  long k_ = 0;
+};
+
+bool isImage(fs::path const& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), ::tolower);
+  return e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".bmp" || e == ".tif" || e == ".tiff" || e == ".ppm";
+}
+
+// ------------------------------------------------------------------ JSON
+std::string num(double v) {
+  if (!std::isfinite(v)) return "null";  // never NaN in the output
+  char b[32];
+  std::snprintf(b, sizeof b, "%.9g", v);
+  return b;
+}
+std::string vec(Eigen::VectorXd const& v) {
+  std::string s = "[";
+  for (int i = 0; i < v.size(); ++i) s += (i ? "," : "") + num(v(i));
+  return s + "]";
+}
+std::string str(std::string const& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) {
+      char b[8];
+      std::snprintf(b, sizeof b, "\\u%04x", c);
+      o += b;
+      continue;
+    }
+    o += c;
+  }
+  return o + "\"";
+}
+
+std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
+  std::ostringstream j;
+  j << "{\"frame\": " << k << ", \"source\": " << str(f.source) << ", \"stamp\": " << num(f.stamp);
+  if (!out.error.empty()) {
+    j << ", \"error\": " << str(out.error) << "}";
+    return j.str();
+  }
+  j << ", \"instruments\": [";
+  for (std::size_t i = 0; i < out.instruments.size(); ++i) {
+    auto const& o = out.instruments[i];
+    j << (i ? ", " : "") << "{\"track\": " << o.track << ", \"insertion_point\": " << o.insertion_point
+      << ", \"contours\": [" << vec(o.contour.lines[0]) << ", " << vec(o.contour.lines[1]) << "]"
+      << ", \"direction\": " << vec(o.pose.axis.direction()) << ", \"moment\": " << vec(o.pose.axis.moment())
+      << ", \"residual_px\": " << num(o.contour.residual_px) << ", \"tip_px\": " << vec(o.contour.tip_px) << "}";
+  }
+  j << "], \"insertion_points\": [";
+  for (std::size_t i = 0; i < out.insertion_points.size(); ++i) {
+    auto const& p = out.insertion_points[i];
+    std::string pixel = "null";
+    if (std::abs(p.image_point.z()) > 1e-12) pixel = vec(Eigen::Vector2d(p.image_point.head<2>() / p.image_point.z()));
+    j << (i ? ", " : "") << "{\"id\": " << p.id << ", \"position\": " << vec(p.estimate.position) << ", \"pixel\": " << pixel
+      << ", \"views\": " << p.estimate.views << ", \"rms_m\": " << num(p.estimate.rms_distance)
+      << ", \"conditioning\": " << num(p.estimate.conditioning)
+      << ", \"well_conditioned\": " << (p.well_conditioned ? "true" : "false") << "}";
+  }
+  j << "], \"latency_ms\": " << num(out.latency_ms) << "}";
+  return j.str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path;
+  double radius = -1.0, fps = 25.0;
+  bool quiet = false;
+  std::vector<std::string> inputs;
+  for (int i = 1; i < argc; ++i) {
+    std::string const a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "endo_guidance_offline: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--camera") camera_path = value();
+    else if (a == "--radius") radius = std::atof(value().c_str());
+    else if (a == "--params") params_path = value();
+    else if (a == "--output") output = value();
+    else if (a == "--overlay") overlay = value();
+    else if (a == "--image-topic") topic = value();
+    else if (a == "--fps") fps = std::atof(value().c_str());
+    else if (a == "--truth") truth_path = value();
+    else if (a == "--quiet") quiet = true;
+    else if (a == "-h" || a == "--help") {
+      usage(stdout);
+      return 0;
+    } else if (!a.empty() && a[0] == '-') {
+      std::fprintf(stderr, "endo_guidance_offline: unknown option '%s'\n", a.c_str());
+      usage(stderr);
+      return 2;
+    } else {
+      inputs.push_back(a);
+    }
+  }
+  if (inputs.empty() || !(fps > 0.0)) {
+    usage(stderr);
+    return 2;
+  }
+  try {
+    PipelineParams params;
+    if (!params_path.empty()) io::loadPipelineYaml(params_path, params);
+    if (radius > 0.0) params.radius = radius;
+    else if (params_path.empty()) throw std::runtime_error("--radius METRES is required (e.g. 0.004 for 8 mm shafts)");
+    if (!(params.radius > 0.0) || params.radius > 0.05) throw std::runtime_error("radius must be in (0, 0.05] m");
+
+    // Sources, in order.
+    std::vector<std::unique_ptr<Source>> sources;
+    std::vector<std::string> images;
+    auto flushImages = [&]() {
+      if (!images.empty()) sources.push_back(std::make_unique<ImageFiles>(images, fps));
+      images.clear();
+    };
+    for (auto const& in : inputs) {
+      fs::path const p(in);
+      if (fs::is_directory(p)) {
+        std::vector<std::string> v;
+        for (auto const& e : fs::directory_iterator(p))
+          if (e.is_regular_file() && isImage(e.path())) v.push_back(e.path().string());
+        std::sort(v.begin(), v.end());
+        if (v.empty()) throw std::runtime_error("directory '" + in + "' holds no images");
+        images.insert(images.end(), v.begin(), v.end());
+      } else if (isImage(p)) {
+        images.push_back(in);
+      } else if (!fs::exists(p)) {
+        throw std::runtime_error("input '" + in + "' does not exist");
+      } else if (p.extension() == ".bag") {
+        flushImages();
+        sources.push_back(std::make_unique<Bag>(in, topic));
+      } else {
+        flushImages();
+        sources.push_back(std::make_unique<Video>(in));
+      }
+    }
+    flushImages();
+
+    std::optional<io::CameraModel> cam;
+    for (auto const& s : sources)
+      if (auto c = s->camera()) cam = c;
+    if (!cam && camera_path.empty()) throw std::runtime_error("--camera CAMERA.yaml is required (no camera_info in the input)");
+    if (!camera_path.empty() && !cam) cam = io::loadCameraYaml(camera_path);
+
+    cv::Mat map1, map2;
+    Eigen::Matrix3d const K = cam->rectifiedK();
+    if (cam->hasDistortion()) {
+      cv::Mat Kc(3, 3, CV_64F), Kn(3, 3, CV_64F), D(1, static_cast<int>(cam->D.size()), CV_64F);
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+          Kc.at<double>(r, c) = cam->K(r, c);
+          Kn.at<double>(r, c) = K(r, c);
+        }
+      for (std::size_t q = 0; q < cam->D.size(); ++q) D.at<double>(0, static_cast<int>(q)) = cam->D[q];
+      cv::initUndistortRectifyMap(Kc, D, cv::Mat(), Kn, cv::Size(cam->width, cam->height), CV_16SC2, map1, map2);
+    }
+    Pipeline pipe(K, cv::Size(cam->width, cam->height), params);
+
+    std::ofstream file;
+    std::ostream* js = &std::cout;
+    if (!output.empty()) {
+      file.open(output);
+      if (!file) throw std::runtime_error("cannot write '" + output + "'");
+      js = &file;
+    }
+    cv::VideoWriter writer;
+    bool const overlay_video = !overlay.empty() && (fs::path(overlay).extension() == ".avi" ||
+                                                    fs::path(overlay).extension() == ".mp4" || fs::path(overlay).extension() == ".mkv");
+    if (!overlay.empty() && !overlay_video) fs::create_directories(overlay);
+
+    long total = 0;
+    for (auto const& s : sources) total += std::max(0L, s->size());
+    bool const tty = !quiet && isatty(2);
+    long k = 0, bad = 0;
+    auto const start = std::chrono::steady_clock::now();
+    PipelineOutput last;
+    for (auto const& s : sources) {
+      Frame f;
+      while (s->next(f)) {
+        PipelineOutput out;
+        if (!f.error.empty()) {
+          out.error = f.error;
+        } else {
+          cv::Mat img = f.image;
+          if (!map1.empty() && img.size() == cv::Size(cam->width, cam->height)) cv::remap(f.image, img, map1, map2, cv::INTER_LINEAR);
+          out = pipe.process(img);
+          if (out.error.empty()) last = out;
+          if (!overlay.empty() && out.error.empty()) {
+            cv::Mat ov = img.clone();
+            std::vector<Eigen::Vector3d> ti;
+            for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
+            drawSegmentationOverlay(ov, out.segmentation, ti);
+            if (overlay_video) {
+              if (!writer.isOpened())
+                writer.open(overlay, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, ov.size());
+              writer.write(ov);
+            } else {
+              char name[32];
+              std::snprintf(name, sizeof name, "%06ld.png", k);
+              cv::imwrite((fs::path(overlay) / name).string(), ov);
+            }
+          }
+        }
+        if (!out.error.empty()) {
+          ++bad;
+          std::fprintf(stderr, "%sframe %ld (%s): %s -- skipped\n", tty ? "\n" : "", k, f.source.c_str(), out.error.c_str());
+        }
+        *js << frameJson(k, f, out) << "\n";
+        ++k;
+        if (tty) {
+          double const el = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+          int const w = 30, done = total > 0 ? static_cast<int>(w * std::min(1.0, static_cast<double>(k) / total)) : 0;
+          std::fprintf(stderr, "\r[%s%s] %ld/%s frames  %.1f fps", std::string(done, '#').c_str(), std::string(w - done, ' ').c_str(),
+                       k, total > 0 ? std::to_string(total).c_str() : "?", k / std::max(el, 1e-9));
+        }
+      }
+    }
+    if (tty) std::fprintf(stderr, "\n");
+    js->flush();
+    if (!quiet) {
+      std::fprintf(stderr, "%ld frames (%ld rejected); insertion points:\n", k, bad);
+      std::vector<Eigen::Vector3d> truth;
+      if (!truth_path.empty()) {
+        YAML::Node const t = YAML::LoadFile(truth_path);
+        for (auto const& q : t["trocars"]) {
+          auto const v = q.as<std::vector<double>>();
+          if (v.size() == 3) truth.emplace_back(v[0], v[1], v[2]);
+        }
+      }
+      for (auto const& p : last.insertion_points) {
+        Eigen::Vector3d const& x = p.estimate.position;
+        std::fprintf(stderr, "  id %d: (%.1f, %.1f, %.1f) mm, %zu views, rms %.2f mm, spread %.1f deg%s", p.id, x.x() * 1e3, x.y() * 1e3,
+                     x.z() * 1e3, p.estimate.views, p.estimate.rms_distance * 1e3,
+                     std::asin(std::min(1.0, p.estimate.conditioning)) * 180.0 / M_PI, p.well_conditioned ? "" : " (ill-conditioned)");
+        if (!truth.empty()) {
+          double best = 1e9;
+          for (auto const& t : truth) best = std::min(best, (t - x).norm());
+          std::fprintf(stderr, "; nearest true trocar %.2f mm away", best * 1e3);
+        }
+        std::fprintf(stderr, "\n");
+      }
+      if (!truth.empty())
+        for (std::size_t i = 0; i < truth.size(); ++i) {
+          double best = 1e9;
+          for (auto const& p : last.insertion_points) best = std::min(best, (truth[i] - p.estimate.position).norm());
+          std::fprintf(stderr, "  true trocar %zu (%.1f, %.1f, %.1f) mm: %s\n", i, truth[i].x() * 1e3, truth[i].y() * 1e3,
+                       truth[i].z() * 1e3, best < 1.0 ? ("estimated within " + std::to_string(best * 1e3).substr(0, 5) + " mm").c_str() : "not found");
+        }
+    }
+  } catch (std::exception const& e) {
+    std::fprintf(stderr, "endo_guidance_offline: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,80 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// Whole-sequence regression of the segmentation on rendered scenes (the accuracy table of the
+// README comes from endo_guidance_eval_synthetic; these bounds guard against regressions).
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+#include "endo_guidance/core/scene_renderer.h"
+#include "endo_guidance/core/segmentation.h"
+
+using namespace endo_guidance;
+
+namespace {
+struct Stats {
+  int visible = 0, found = 0, false_shafts = 0;
+  std::vector<double> err;
+};
+
+Stats run(RenderOptions const& ro, int frames) {
+  SyntheticScene scene(defaultInstruments());
+  SceneRenderer renderer(640, 480, ro);
+  InstrumentSegmenter seg;
+  Stats s;
+  for (int k = 0; k < frames; ++k) {
+    auto const views = scene.frame(k);
+    auto const res = seg.process(renderer.render(views, k));
+    std::vector<bool> used(res.contours.size(), false);
+    for (auto const& v : views) {
+      ++s.visible;
+      Eigen::Vector3d ta = v.truth.lines[0] - v.truth.lines[1];
+      ta /= ta.head<2>().norm();
+      for (std::size_t j = 0; j < res.contours.size(); ++j) {
+        auto const& c = res.contours[j];
+        Eigen::Vector2d const m = 0.5 * (c.entry_px + c.tip_px);
+        if (used[j] || std::abs(ta.dot(Eigen::Vector3d(m.x(), m.y(), 1))) > 10.0 ||
+            std::abs(ta.dot(Eigen::Vector3d(c.entry_px.x(), c.entry_px.y(), 1))) > 10.0)
+          continue;
+        used[j] = true;
+        ++s.found;
+        for (int l = 0; l < 2; ++l) {
+          Eigen::Vector2d const q = v.truth.tip_px;
+          Eigen::Vector2d const f = q - v.truth.lines[l].head<2>() * v.truth.lines[l].dot(Eigen::Vector3d(q.x(), q.y(), 1));
+          s.err.push_back(std::abs(c.lines[l].dot(Eigen::Vector3d(f.x(), f.y(), 1))));
+        }
+        break;
+      }
+    }
+    for (bool u : used) s.false_shafts += !u;
+  }
+  std::sort(s.err.begin(), s.err.end());
+  return s;
+}
+}  // namespace
+
+TEST(Segmentation, CleanSceneRegression) {
+  Stats const s = run(RenderOptions{}, 80);
+  double const p50 = s.err.empty() ? 1e9 : s.err[s.err.size() / 2];
+  std::printf("[ clean, 80 frames ] found %d/%d, false %d, line error at the tip p50 %.3f px\n", s.found, s.visible,
+              s.false_shafts, p50);
+  EXPECT_GT(s.found, 0.7 * s.visible);
+  EXPECT_LT(s.false_shafts, 0.2 * 80);
+  EXPECT_LT(p50, 0.05);
+}
+
+TEST(Segmentation, BlackShaftsInACircularView) {
+  RenderOptions ro;
+  ro.black_shafts = true;
+  ro.circular_fov = true;
+  Stats const s = run(ro, 60);
+  std::printf("[ black, circular, 60 frames ] found %d/%d, false %d\n", s.found, s.visible, s.false_shafts);
+  EXPECT_GT(s.found, 0.6 * s.visible);
+}
+
+TEST(Segmentation, RejectsBadInput) {
+  InstrumentSegmenter seg;
+  EXPECT_THROW(seg.process(cv::Mat()), cv::Exception);
+  EXPECT_THROW(seg.process(cv::Mat(10, 10, CV_8U)), cv::Exception);
+  // A plain tissue image: no shaft.
+  EXPECT_TRUE(seg.process(cv::Mat(240, 320, CV_8UC3, cv::Scalar(60, 70, 170))).contours.empty());
+}

@@ -1,0 +1,58 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <fstream>
+
+#include "endo_guidance/io/yaml_config.h"
+
+using namespace endo_guidance;
+
+namespace {
+std::string write(std::string const& name, std::string const& text) {
+  std::string const path = testing::TempDir() + name;
+  std::ofstream(path) << text;
+  return path;
+}
+std::string const kCamera =
+    "image_width: 640\nimage_height: 480\ncamera_name: c\n"
+    "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [500, 0, 319.5, 0, 510, 239.5, 0, 0, 1]\n"
+    "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0.1, 0, 0, 0, 0]\n"
+    "projection_matrix:\n  rows: 3\n  cols: 4\n  data: [480, 0, 320, 0, 0, 490, 240, 0, 0, 0, 1, 0]\n";
+}  // namespace
+
+TEST(YamlConfig, CameraInfoYaml) {
+  auto const c = io::loadCameraYaml(write("cam.yaml", kCamera));
+  EXPECT_EQ(c.width, 640);
+  EXPECT_EQ(c.K(1, 1), 510.0);
+  EXPECT_TRUE(c.hasDistortion());
+  EXPECT_EQ(c.rectifiedK()(0, 0), 480.0);  // P's intrinsics for the rectified image
+  std::string zero = kCamera;
+  zero.replace(zero.find("[500,"), 5, "[0,");
+  EXPECT_THROW(io::loadCameraYaml(write("zero.yaml", zero)), std::runtime_error);
+  EXPECT_THROW(io::loadCameraYaml(write("nosize.yaml", "camera_matrix: {data: [1,0,0,0,1,0,0,0,1]}\n")), std::runtime_error);
+  EXPECT_THROW(io::loadCameraYaml("/nonexistent/cam.yaml"), std::runtime_error);
+}
+
+TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
+  PipelineParams p;
+  io::loadPipelineYaml(write("p.yaml", "radius: 0.0025\nsegmentation:\n  grow_thresholds: [10, 20]\n"
+                                       "insertion_points:\n  memory_views: 100\n"), p);
+  EXPECT_EQ(p.radius, 0.0025);
+  EXPECT_EQ(p.segmentation.regions.thresholds, (std::vector<int>{10, 20}));
+  EXPECT_EQ(p.insertion_points.tracker.memory_views, 100.0);
+  EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", "segmentation:\n  sigma_radiuss: 2\n"), p), std::runtime_error);
+  // config/pipeline.yaml holds exactly the code defaults.
+  PipelineParams const defaults;
+  PipelineParams shipped;
+  io::loadPipelineYaml(ENDO_GUIDANCE_SOURCE_DIR "/config/pipeline.yaml", shipped);
+  EXPECT_EQ(shipped.radius, defaults.radius);
+  EXPECT_EQ(shipped.segmentation.regions.thresholds, defaults.segmentation.regions.thresholds);
+  EXPECT_EQ(shipped.segmentation.seeds.threshold, defaults.segmentation.seeds.threshold);
+  EXPECT_EQ(shipped.segmentation.contours.max_residual_px, defaults.segmentation.contours.max_residual_px);
+  EXPECT_EQ(shipped.segmentation.contours.min_fill, defaults.segmentation.contours.min_fill);
+  EXPECT_EQ(shipped.segmentation.sigma_delta, defaults.segmentation.sigma_delta);
+  EXPECT_EQ(shipped.insertion_points.tracker.memory_views, defaults.insertion_points.tracker.memory_views);
+  EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
+  EXPECT_EQ(shipped.pose.min_distance, defaults.pose.min_distance);
+}

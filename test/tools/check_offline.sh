@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The offline program on a short rendered sequence with one unreadable frame: one JSON object per
+# frame, the bad frame reported (stderr and "error") and skipped, the run goes on, and the
+# insertion points appear; bad arguments fail with a message.
+set -euo pipefail
+BIN="$1"
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+"$BIN/endo_guidance_synthetic" --write-sequence "$T/seq" --frames 120 >/dev/null
+echo "not a png" > "$T/seq/frames/000050.png"
+"$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" --radius 0.004 --output "$T/out.jsonl" \
+  --overlay "$T/ov" --quiet "$T/seq/frames" 2> "$T/err.txt"
+grep -q "frame 50 .*unreadable image -- skipped" "$T/err.txt"
+/usr/bin/python3 - "$T/out.jsonl" <<'PY'
+import json, math, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+assert len(rows) == 120, len(rows)
+assert [r["frame"] for r in rows] == list(range(120))
+bad = [r for r in rows if "error" in r]
+assert len(bad) == 1 and bad[0]["frame"] == 50, bad
+good = [r for r in rows if "error" not in r]
+assert sum(len(r["instruments"]) for r in good) > 150
+for r in good:
+    for i in r["instruments"]:
+        assert abs(math.hypot(*i["direction"]) - 1) < 1e-6
+        for l in i["contours"]:
+            assert abs(math.hypot(l[0], l[1]) - 1) < 1e-6
+assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
+print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts")
+PY
+test "$(ls "$T/ov" | wc -l)" -eq 119
+# Bad arguments and bad camera files fail with a message, not a crash.
+if "$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" "$T/seq/frames" 2>/dev/null; then exit 1; fi
+sed 's/data: \[500/data: [0/' "$T/seq/camera.yaml" > "$T/zero.yaml"
+if "$BIN/endo_guidance_offline" --camera "$T/zero.yaml" --radius 0.004 "$T/seq/frames" 2>"$T/e2.txt"; then exit 1; fi
+grep -q "focal length" "$T/e2.txt"
+echo "offline program checks passed"
