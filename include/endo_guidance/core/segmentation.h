@@ -21,6 +21,7 @@ struct SegmentationParams {
   int sigma_delta = 10;           ///< Sigma filter range (feature units)
   int fov_refresh = 25;           ///< frames between field-of-view detections (it rarely changes)
   int level_memory_px = 8;        ///< processing px: a seed this close to last frame's entry reuses its level
+  int full_search_every = 5;      ///< frames: a rejected seed is searched in full again this often
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
@@ -60,9 +61,17 @@ class InstrumentSegmenter {
   FieldOfView fov_;
   cv::Size fov_size_;
   int frames_since_fov_ = 0;
-  int rememberedLevel(cv::Point const& seed) const;
+  struct Memory {           // what a seed near `entry` gave in the last frame
+    cv::Point entry;        // processing px
+    int level = 0;          // threshold level of the accepted (or smallest rejected) region
+    double score = 0.0;     // its side-pair score
+    bool accepted = false;
+    ContourRejection why = ContourRejection::kNone;
+    int age = 0;            // frames since its last full search
+  };
+  Memory const* remembered(cv::Point const& seed) const;
   RegionGrower grower_;
-  std::vector<std::pair<cv::Point, int>> last_levels_;  // entry (processing px) -> threshold level
+  std::vector<Memory> memory_;
   cv::Mat small_, raw_, filtered_, labels_;
 };
 

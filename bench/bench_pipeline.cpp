@@ -1,0 +1,148 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+//
+// Speed of the per-frame pipeline and of each segmentation stage, single thread, at 640x480,
+// 720x576 and 1920x1080, each reported as a ratio to cv::cvtColor(BGR -> HSV) of the same
+// frame measured in the same run (never asserted: machines are noisy).
+// Run: scripts/bench.sh   (or build/devel/lib/endo_guidance/endo_guidance_bench_pipeline)
+#include <benchmark/benchmark.h>
+
+#include <map>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "endo_guidance/core/colour_feature.h"
+#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/core/scene_renderer.h"
+#include "endo_guidance/core/sigma_filter.h"
+
+using namespace endo_guidance;
+
+namespace {
+
+struct Frames {
+  std::vector<cv::Mat> images;
+  Eigen::Matrix3d K;
+};
+
+// 16 rendered frames of the default scene at the given size (K scaled from 640x480).
+Frames const& frames(int w, int h) {
+  static std::map<int, Frames> cache;
+  Frames& f = cache[w];
+  if (f.images.empty()) {
+    SyntheticSceneOptions so;
+    double const s = w / 640.0;
+    so.width = w;
+    so.height = h;
+    so.K << 500 * s, 0, (w - 1) / 2.0, 0, 500 * s, (h - 1) / 2.0, 0, 0, 1;
+    SyntheticScene scene(defaultInstruments(), so);
+    SceneRenderer r(w, h, RenderOptions{});
+    // Consecutive frames, as a video (the segmentation carries each shaft's level across frames).
+    for (int k = 0; k < 48; ++k) f.images.push_back(r.render(scene.frame(k), k));
+    f.K = so.K;
+  }
+  return f;
+}
+
+int const kSizes[3][2] = {{640, 480}, {720, 576}, {1920, 1080}};
+
+void BM_HSV(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  cv::Mat hsv;
+  std::size_t i = 0;
+  for (auto _ : st) {
+    cv::cvtColor(f.images[i++ % f.images.size()], hsv, cv::COLOR_BGR2HSV);
+    benchmark::DoNotOptimize(hsv.data);
+  }
+}
+
+void BM_Pipeline(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  Pipeline p(f.K, f.images[0].size());
+  for (auto const& im : f.images) p.process(im);  // warm: insertion points, levels
+  std::size_t i = 0;
+  for (auto _ : st) {
+    auto out = p.process(f.images[i++ % f.images.size()]);
+    benchmark::DoNotOptimize(out);
+  }
+}
+
+void BM_Stage_Resize(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
+  cv::Mat small;
+  for (auto _ : st) cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+}
+
+void BM_Stage_ColourFeature(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
+  cv::Mat small, feat;
+  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  ColourFeature const cf;
+  for (auto _ : st) cf.compute(small, feat);
+}
+
+void BM_Stage_SigmaFilter(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
+  cv::Mat small, feat, out;
+  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  ColourFeature().compute(small, feat);
+  for (auto _ : st) sigmaFilter(feat, out, 1, 10);
+}
+
+void BM_Stage_Segmentation(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  InstrumentSegmenter seg;
+  for (auto const& im : f.images) seg.process(im);
+  std::size_t i = 0;
+  for (auto _ : st) benchmark::DoNotOptimize(seg.process(f.images[i++ % f.images.size()]));
+}
+
+void sizes(benchmark::internal::Benchmark* b) {
+  for (auto const& s : kSizes) b->Args({s[0], s[1]});
+  b->ArgNames({"w", "h"});
+  b->Unit(benchmark::kMicrosecond);
+}
+BENCHMARK(BM_HSV)->Apply(sizes);
+BENCHMARK(BM_Pipeline)->Apply(sizes);
+BENCHMARK(BM_Stage_Resize)->Apply(sizes);
+BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
+BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);
+BENCHMARK(BM_Stage_Segmentation)->Apply(sizes);
+
+// Each result as a ratio to BM_HSV at the same size, measured in the same run.
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(std::vector<Run> const& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    std::map<std::string, double> ref;
+    auto sizeOf = [](std::string const& n) { return n.substr(n.find('/')); };
+    for (auto const& [n, t] : times_)
+      if (n.rfind("BM_HSV/", 0) == 0) ref[sizeOf(n)] = t;
+    std::printf("\nRatio to one cv::cvtColor(BGR->HSV) of the same frame, same run (single thread):\n");
+    for (auto const& [n, t] : times_) {
+      auto const it = ref.find(sizeOf(n));
+      if (it != ref.end()) std::printf("  %-40s %8.3f   (%.0f us)\n", n.c_str(), t / it->second, t);
+    }
+  }
+
+ private:
+  std::vector<std::pair<std::string, double>> times_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cv::setNumThreads(1);  // single thread, as the targets are stated
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  RatioReporter rep;
+  benchmark::RunSpecifiedBenchmarks(&rep);
+  benchmark::Shutdown();
+  return 0;
+}
