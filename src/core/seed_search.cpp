@@ -34,15 +34,30 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
   int const n = static_cast<int>(fov.border.size());
   if (n < 8) return seeds;
   double const cos_max = std::cos(p.near_angle_deg * M_PI / 180.0);
-  // Profile along the border, 3-tap smoothed; per-point threshold (relaxed near trocar arcs).
-  std::vector<float> v(static_cast<std::size_t>(n));
+  // Profile along the border, 3-tap smoothed; per-point threshold (relaxed near trocar arcs) and
+  // relative to the local background: the median of the profile over a window of the border
+  // (dark, vignetted tissue near the border is low in absolute terms; the shaft is lower still).
+  std::vector<float> v(static_cast<std::size_t>(n)), sm(static_cast<std::size_t>(n));
   std::vector<int> facing(static_cast<std::size_t>(n), -1);
   std::vector<unsigned char> low(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) v[i] = feature.at<std::uint8_t>(fov.border[i]);
+  for (int i = 0; i < n; ++i) sm[i] = (v[(i + n - 1) % n] + 2.f * v[i] + v[(i + 1) % n]) * 0.25f;
+  int const half = std::max(8, static_cast<int>(p.background_window * n / 2));
+  std::vector<float> win;
+  std::vector<float> background(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; i += 4) {  // every 4th point, then held: the background varies slowly
+    win.clear();
+    for (int j = -half; j <= half; j += 2) win.push_back(sm[((i + j) % n + n) % n]);
+    std::nth_element(win.begin(), win.begin() + win.size() / 2, win.end());
+    for (int k = i; k < std::min(n, i + 4); ++k) background[k] = win[win.size() / 2];
+  }
   for (int i = 0; i < n; ++i) {
-    float const s = (v[(i + n - 1) % n] + 2.f * v[i] + v[(i + 1) % n]) * 0.25f;
     if (!trocars.empty()) facing[i] = facingTrocar(fov.border[i], fov.centre, trocars, cos_max);
-    low[i] = s <= (facing[i] >= 0 ? p.near_threshold : p.threshold);
+    float const abs_t = facing[i] >= 0 ? p.near_threshold : p.threshold;
+    float thr = abs_t;
+    if (p.relative_threshold > 0.0)
+      thr = std::min(abs_t, std::max(static_cast<float>(p.relative_threshold) * background[i], static_cast<float>(p.min_threshold)));
+    low[i] = sm[i] <= thr;
   }
   // Runs of low values on the closed path: start scanning just after a high value.
   int start = 0;
@@ -69,6 +84,7 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
       int const mid = (i + len / 2) % n;
       s.position = fov.border[mid];
       s.mean_value = sum / len;
+      s.background = background[mid];
       s.insertion_point = facing[mid];
       seeds.push_back(s);
     }

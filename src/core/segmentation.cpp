@@ -78,7 +78,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
     // seed near last frame's rejected region only re-grows that region (to claim it) and is
     // searched in full again every `full_search_every` frames.
-    auto const& T = params_.regions.thresholds;
+    // Growth levels: the absolute thresholds, capped between the seed's and the tissue's levels.
+    std::vector<int> T = params_.regions.thresholds;
+    auto const& fr = params_.regions.background_fractions;
+    if (seed.background > seed.mean_value + 4.f)  // only where the tissue around is brighter
+      for (std::size_t i = 0; i < T.size() && i < fr.size(); ++i) {
+        int const rel = static_cast<int>(std::lround(seed.mean_value + fr[i] * (seed.background - seed.mean_value)));
+        T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
+      }
     Memory const* mem = remembered(seed.position);
     if (mem && !mem->accepted && mem->age + 1 < params_.full_search_every) {
       if (auto r = grower_.grow(seed.position, T[mem->level], si)) {

@@ -20,6 +20,7 @@
 #include <sstream>
 #include <string>
 
+#include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/segmentation.h"
 
 namespace fs = std::filesystem;
@@ -54,6 +55,7 @@ struct InvivoStats {
 };
 
 bool verbose = false;
+bool dark_border = false;
 
 void evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area) {
   InvivoStats st;
@@ -231,17 +233,37 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
       std::printf("robotic dataset %d: cannot open %s: skipped\n", ds, video.c_str());
       continue;
     }
-    InstrumentSegmenter seg(sp);
+    // No intrinsics are published for these sequences: assumed pinhole, fx = fy = 700 px at the
+    // image centre (about 54 deg horizontal field of view), 8 mm shafts.
+    Eigen::Matrix3d K;
+    K << 700, 0, 359.5, 0, 700, 287.5, 0, 0, 1;
+    PipelineParams pp;
+    pp.segmentation = sp;
+    pp.radius = 0.004;
+    if (dark_border) {  // config/dark_border.yaml
+      pp.segmentation.seeds.relative_threshold = 0.7;
+      pp.segmentation.regions.background_fractions = {0.4, 0.52, 0.64, 0.76, 0.88};
+    }
+    Pipeline pipe(K, cv::Size(720, 576), pp);
     std::vector<double> ang, dist;
     int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0;
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
-    int const last = by_frame.rbegin()->first;
-    while (frame <= last && cap.read(im)) {
+    std::map<int, std::vector<Eigen::Vector3d>> trocar_track;  // id -> positions over the second half
+    std::map<int, Eigen::Vector3d> trocar_image;
+    PipelineOutput out;
+    while (cap.read(im)) {
+      if (im.size() != cv::Size(720, 576)) break;
+      out = pipe.process(im);
+      if (frame > 185)
+        for (auto const& p : out.insertion_points) {
+          trocar_track[p.id].push_back(p.estimate.position);
+          trocar_image[p.id] = p.image_point;
+        }
       auto it = by_frame.find(frame);
       if (it != by_frame.end()) {
-        SegmentationResult const r = seg.process(im);
+        SegmentationResult const& r = out.segmentation;
         ++frames_annot;
         dets += static_cast<int>(r.contours.size());
         for (auto const& a : it->second) {
@@ -268,7 +290,9 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
         }
         if (!overlay_dir.empty() && frame % 50 == 0) {
           cv::Mat ov = im.clone();
-          drawSegmentationOverlay(ov, r);
+          std::vector<Eigen::Vector3d> ti;
+          for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
+          drawSegmentationOverlay(ov, r, ti);
           for (auto const& a : it->second)
             cv::line(ov, cv::Point(a.a.x(), a.a.y()), cv::Point(a.b.x(), a.b.y()), {0, 0, 255}, 1);
           fs::create_directories(overlay_dir);
@@ -282,6 +306,32 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                 static_cast<double>(dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
                 pct(dist, 0.5), pct(dist, 0.9), pct(ang, 0.5), pct(ang, 0.9));
+    std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:\n", frame - 1);
+    for (auto const& [id, v] : trocar_track) {
+      if (v.size() < 10) continue;
+      Eigen::Vector3d m = Eigen::Vector3d::Zero();
+      for (auto const& q : v) m += q;
+      m /= static_cast<double>(v.size());
+      double sd = 0.0;
+      for (auto const& q : v) sd += (q - m).squaredNorm();
+      sd = std::sqrt(sd / v.size());
+      Eigen::Vector3d const ip = trocar_image[id];
+      std::string where = "at infinity";
+      if (std::abs(ip.z()) > 1e-12) {
+        Eigen::Vector2d const px = ip.head<2>() / ip.z();
+        bool const inside = px.x() >= 0 && px.y() >= 0 && px.x() < 720 && px.y() < 576;
+        char buf[96];
+        std::snprintf(buf, sizeof buf, "image (%.0f, %.0f)%s", px.x(), px.y(), inside ? " INSIDE the image" : " outside the image");
+        where = buf;
+      }
+      auto const last = out.insertion_points;
+      double cond = 0.0;
+      for (auto const& p : last)
+        if (p.id == id) cond = p.estimate.conditioning;
+      std::printf("    id %d: mean (%.0f, %.0f, %.0f) mm, RMS motion %.1f mm over %zu frames, spread %.1f deg, %s\n", id,
+                  m.x() * 1e3, m.y() * 1e3, m.z() * 1e3, sd * 1e3, v.size(), std::asin(std::min(1.0, cond)) * 180 / M_PI,
+                  where.c_str());
+    }
   }
 }
 
@@ -298,9 +348,10 @@ int main(int argc, char** argv) {
     else if (a == "--min-area" && i + 1 < argc) min_area = std::atoi(argv[++i]);
     else if (a == "--invivo-only") robotic = false;
     else if (a == "--verbose") verbose = true;
+    else if (a == "--dark-border") dark_border = true;
     else if (a == "--robotic-only") invivo = false;
     else {
-      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only]\n");
+      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--dark-border] [--verbose]\n");
       return 2;
     }
   }

@@ -15,6 +15,10 @@ struct RegionGrowingParams {
   /// region. Pale tissue (membranes, peritoneum) is low in some images and not in others; the
   /// segmentation keeps the level whose boundary is the best pair of straight lines.
   std::vector<int> thresholds{18, 24, 30, 37, 45};
+  /// The levels actually tried for a seed are min(threshold, seed + f (background - seed)) for the
+  /// fractions below (paired with `thresholds`): between the shaft's and the tissue's levels where
+  /// the border is dark, the absolute levels where it is bright.
+  std::vector<double> background_fractions{};  // off by default (config/dark_border.yaml turns it on)
   int min_area = 40;               ///< processing px: smaller regions are not shafts
   double max_area_fraction = 0.35; ///< of the field of view: larger ones have leaked into tissue
   int max_regions = 8;             ///< accepted regions per frame
