@@ -13,6 +13,7 @@
 #include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/synthetic_scene.h"
+#include "ratio_reporter.h"
 
 using namespace endo_guidance;
 
@@ -116,34 +117,10 @@ void BM_IntersectAxesRobust(benchmark::State& st) {
 }
 BENCHMARK(BM_IntersectAxesRobust)->Arg(50)->Arg(300);
 
-// Prints each result as a ratio to the reference measured in the same run.
-class RatioReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(std::vector<Run> const& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
-  }
-  void Finalize() override {
-    ConsoleReporter::Finalize();
-    double ref = 0.0;
-    for (auto const& [n, t] : times_)
-      if (n.rfind("BM_Reference_HSV_640x480", 0) == 0) ref = t;
-    if (ref <= 0.0) return;
-    std::printf("\nRatio to one cv::cvtColor(BGR->HSV) of a 640x480 frame (%.1f us here):\n", ref / 1e3);
-    for (auto const& [n, t] : times_) std::printf("  %-45s %10.5f\n", n.c_str(), t / ref);
-  }
-
- private:
-  std::vector<std::pair<std::string, double>> times_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  RatioReporter rep;
-  benchmark::RunSpecifiedBenchmarks(&rep);
-  benchmark::Shutdown();
-  return 0;
+  endo_guidance::bench::RatioReporter rep("Ratio to one cv::cvtColor(BGR->HSV) of a 640x480 frame, same run:",
+                                          [](std::string const&) { return std::string("BM_Reference_HSV_640x480"); });
+  return endo_guidance::bench::runBenchmarks(argc, argv, rep);
 }

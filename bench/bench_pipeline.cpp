@@ -7,6 +7,7 @@
 #include <benchmark/benchmark.h>
 
 #include <map>
+#include <string>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -14,6 +15,7 @@
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/sigma_filter.h"
+#include "ratio_reporter.h"
 
 using namespace endo_guidance;
 
@@ -111,38 +113,12 @@ BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
 BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);
 BENCHMARK(BM_Stage_Segmentation)->Apply(sizes);
 
-// Each result as a ratio to BM_HSV at the same size, measured in the same run.
-class RatioReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(std::vector<Run> const& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
-  }
-  void Finalize() override {
-    ConsoleReporter::Finalize();
-    std::map<std::string, double> ref;
-    auto sizeOf = [](std::string const& n) { return n.substr(n.find('/')); };
-    for (auto const& [n, t] : times_)
-      if (n.rfind("BM_HSV/", 0) == 0) ref[sizeOf(n)] = t;
-    std::printf("\nRatio to one cv::cvtColor(BGR->HSV) of the same frame, same run (single thread):\n");
-    for (auto const& [n, t] : times_) {
-      auto const it = ref.find(sizeOf(n));
-      if (it != ref.end()) std::printf("  %-40s %8.3f   (%.0f us)\n", n.c_str(), t / it->second, t);
-    }
-  }
-
- private:
-  std::vector<std::pair<std::string, double>> times_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  cv::setNumThreads(1);  // single thread, as the targets are stated
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  RatioReporter rep;
-  benchmark::RunSpecifiedBenchmarks(&rep);
-  benchmark::Shutdown();
-  return 0;
+  // Each result divided by BM_HSV at the same size.
+  endo_guidance::bench::RatioReporter rep(
+      "Ratio to one cv::cvtColor(BGR->HSV) of the same frame, same run (single thread):",
+      [](std::string const& n) { return "BM_HSV" + n.substr(n.find('/')); });
+  return endo_guidance::bench::runBenchmarks(argc, argv, rep);
 }

@@ -21,6 +21,7 @@
 #include <string>
 
 #include "endo_guidance/core/pipeline.h"
+#include "tool_util.h"
 #include "endo_guidance/core/segmentation.h"
 
 namespace fs = std::filesystem;
@@ -28,11 +29,7 @@ using namespace endo_guidance;
 
 namespace {
 
-double pct(std::vector<double> v, double p) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
-}
+using tools::percentile;
 
 // The quadrilateral between the two contour lines from the entry to the tip.
 std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {
@@ -141,7 +138,7 @@ void evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
           d.push_back(e);
         }
       if (!d.empty()) {
-        st.line_median_px.push_back(pct(d, 0.5));
+        st.line_median_px.push_back(percentile(d, 0.5));
         st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
       }
     }
@@ -205,7 +202,7 @@ void evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   for (auto const& [k, v] : st.misses) std::printf(" [%s: %d]", k.c_str(), v);
   std::printf("\n");
   std::printf("  contour line to mask boundary: median of per-shaft medians %.2f px, p90 %.2f px; all boundary px: median %.2f px, p95 %.2f px\n",
-              pct(st.line_median_px, 0.5), pct(st.line_median_px, 0.9), pct(st.all_dist_px, 0.5), pct(st.all_dist_px, 0.95));
+              percentile(st.line_median_px, 0.5), percentile(st.line_median_px, 0.9), percentile(st.all_dist_px, 0.5), percentile(st.all_dist_px, 0.95));
 }
 
 void evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp) {
@@ -305,7 +302,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                 "%.2f detections/frame\n", ds, frames_annot, n, found, 100.0 * found / std::max(1, n),
                 static_cast<double>(dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
-                pct(dist, 0.5), pct(dist, 0.9), pct(ang, 0.5), pct(ang, 0.9));
+                percentile(dist, 0.5), percentile(dist, 0.9), percentile(ang, 0.5), percentile(ang, 0.9));
     std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:\n", frame - 1);
     for (auto const& [id, v] : trocar_track) {
       if (v.size() < 10) continue;

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "endo_guidance/core/pipeline.h"
+#include "tool_util.h"
 #include "endo_guidance/core/scene_renderer.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -24,11 +25,7 @@ using namespace endo_guidance;
 
 namespace {
 
-double pct(std::vector<double> v, double p) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
-}
+using tools::percentile;
 
 Eigen::Vector3d axisOf(ApparentContour const& c) {
   Eigen::Vector3d const a = c.lines[0] - c.lines[1];
@@ -175,15 +172,15 @@ int main(int argc, char** argv) {
     Result const r = run(s, frames, overlay);
     double const found = 100.0 * r.found / std::max(1, r.visible);
     double const fpf = static_cast<double>(r.false_shafts) / std::max(1, r.frames);
-    double const tro = pct(r.trocar_mm, 1.0);
+    double const tro = percentile(r.trocar_mm, 1.0);
     std::printf("%-15s %6.1f%% %8.3f %7.3fpx %7.3fpx %7.3f° %7.3f%% %7.2fmm %9d %12.2f %9d\n", s.name.c_str(), found, fpf,
-                pct(r.line_px, 0.5), pct(r.line_px, 0.95), pct(r.dir_deg, 0.5), 100 * pct(r.dist_rel, 0.5), tro,
-                r.false_late, pct(r.latency_ms, 0.5), r.frames);
+                percentile(r.line_px, 0.5), percentile(r.line_px, 0.95), percentile(r.dir_deg, 0.5), 100 * percentile(r.dist_rel, 0.5), tro,
+                r.false_late, percentile(r.latency_ms, 0.5), r.frames);
     if (check) {
       bool const is_clean = s.name == "clean";
       double const min_found = s.name == "black_circular" ? 97.0 : 99.0;
-      pass &= found >= min_found && fpf <= 0.01 && pct(r.line_px, 0.5) <= (is_clean ? 0.10 : 0.2) &&
-              pct(r.line_px, 0.95) <= (is_clean ? 0.18 : 0.45) && tro <= (s.breathing > 0 ? 0.8 : 0.2);
+      pass &= found >= min_found && fpf <= 0.01 && percentile(r.line_px, 0.5) <= (is_clean ? 0.10 : 0.2) &&
+              percentile(r.line_px, 0.95) <= (is_clean ? 0.18 : 0.45) && tro <= (s.breathing > 0 ? 0.8 : 0.2);
     }
   }
   if (check) std::printf("targets: %s\n", pass ? "MET" : "NOT MET");

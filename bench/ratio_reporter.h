@@ -1,0 +1,52 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// Console reporter that also prints every benchmark as a ratio to a reference benchmark measured
+// in the same run (speed is reported, never asserted: machines are noisy).
+#pragma once
+
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <functional>
+#include <opencv2/core/utility.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace endo_guidance::bench {
+
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  /// reference_of(name) names the benchmark a result is divided by ("" = not reported).
+  RatioReporter(std::string title, std::function<std::string(std::string const&)> reference_of)
+      : title_(std::move(title)), reference_of_(std::move(reference_of)) {}
+  void ReportRuns(std::vector<Run> const& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    std::printf("\n%s\n", title_.c_str());
+    for (auto const& [n, t] : times_) {
+      std::string const ref = reference_of_(n);
+      for (auto const& [m, tr] : times_)
+        if (m == ref && tr > 0.0) std::printf("  %-45s %9.4f   (%.1f us)\n", n.c_str(), t / tr, t / 1e3);
+    }
+  }
+
+ private:
+  std::string title_;
+  std::function<std::string(std::string const&)> reference_of_;
+  std::vector<std::pair<std::string, double>> times_;
+};
+
+/// main() of the benchmark programs: single thread, the reporter above.
+inline int runBenchmarks(int argc, char** argv, RatioReporter& reporter) {
+  cv::setNumThreads(1);
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  benchmark::Shutdown();
+  return 0;
+}
+
+}  // namespace endo_guidance::bench
