@@ -273,6 +273,10 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   };
   std::vector<unsigned char> border(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) border[i] = onBorder(B[i]);
+  // A region that meets the border in several places has merged with another instrument.
+  int runs = 0;
+  for (int i = 0; i < n; ++i) runs += border[i] && !border[(i + n - 1) % n];
+  fit.merged = runs >= 2;
   // The two classes ([Doignon07] Sec. 3) are the two boundary chains that leave the entry (the
   // seed's border run), one along each side; for a lone shaft they meet at the boundary point
   // farthest from the seed, the paper's split point. Following each side from the entry (rather
@@ -469,7 +473,10 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
       cv::fillConvexPoly(slab, sp, 255);
     }
     double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg & slab), both = cv::countNonZero(quad & reg);
-    if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < p.min_inside * nr) return reject(ContourRejection::kNotFilled);
+    // A region merged with a crossing or touching instrument has that instrument's pixels near
+    // the strip too: only the fill of the strip is required then.
+    double const inside = sides.merged ? p.min_inside_merged : p.min_inside;
+    if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < inside * nr) return reject(ContourRejection::kNotFilled);
   }
   fit.contour = c;
   return fit;

@@ -34,7 +34,8 @@ struct ContourLinesParams {
   double min_elongation = 2.0;    ///< length (entry to tip) over mean width
   double min_entry_sine = 0.2;    ///< sine of the angle between the shaft and the FOV border at the entry
   double min_fill = 0.45;         ///< fraction of the strip between the lines covered by the region
-  double min_inside = 0.6;        ///< fraction of the region inside that strip
+  double min_inside = 0.6;        ///< fraction of the region inside that strip (near it)
+  double min_inside_merged = 0.3; ///< the same for a region that meets the FOV border more than once
   std::uint64_t seed = 7;
 };
 
@@ -86,6 +87,7 @@ struct SideFit {
   std::array<std::vector<Eigen::Vector2d>, 2> points;
   Eigen::Vector2d entry = Eigen::Vector2d::Zero(), far = Eigen::Vector2d::Zero();
   int inliers = 0;  ///< LMedS inliers over both sides: the quality of the straight-line pair
+  bool merged = false;  ///< the region meets the FOV border more than once (instruments merged)
   ContourRejection rejection = ContourRejection::kNone;
 };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
