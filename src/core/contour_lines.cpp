@@ -55,7 +55,7 @@ std::optional<Eigen::Vector3d> fitLineLS(std::vector<Eigen::Vector2d> const& pts
 }
 
 // Bilinear sample of the chroma of a BGR image at (x, y); false outside.
-bool chromaAt(cv::Mat const& bgr, double x, double y, float* out) {
+bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value = nullptr) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
   int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
@@ -65,7 +65,38 @@ bool chromaAt(cv::Mat const& bgr, double x, double y, float* out) {
   for (int k = 0; k < 3; ++k)
     c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
   *out = ColourFeature::chroma(c[0], c[1], c[2]);
+  if (value) *value = std::max(c[0], std::max(c[1], c[2]));
   return true;
+}
+
+// Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft
+// at the end): the centroid of the slope in a fixed window of +-2.5 px about its peak -- exact
+// for a box-filtered (anti-aliased) step under bilinear sampling and unbiased for any symmetric
+// blur, whereas a parabola on the peak, or a lobe cut at a fraction of it, is biased by up to
+// 0.15 px on sharp edges. nullopt: no descent steeper than min_slope (per sample pair), or the
+// window would be cut by the profile's end (the centroid would be biased).
+std::optional<double> steepestDescent(std::vector<float> const& prof, double ds, double min_slope) {
+  int const ns = static_cast<int>(prof.size());
+  int bi = -1;
+  float bg = -static_cast<float>(min_slope);
+  for (int i = 1; i + 1 < ns; ++i) {
+    float const g = prof[i + 1] - prof[i - 1];
+    if (g < bg) {
+      bg = g;
+      bi = i;
+    }
+  }
+  int const wr = static_cast<int>(std::lround(2.5 / ds));
+  if (bi < 0 || bi - wr < 1 || bi + wr > ns - 2) return std::nullopt;
+  double sw = 0.0, swx = 0.0;
+  for (int i = bi - wr; i <= bi + wr; ++i) {
+    double const g = -(prof[i + 1] - prof[i - 1]);
+    if (g <= 0.0) continue;
+    sw += g;
+    swx += g * i;
+  }
+  if (!(sw > 0.0)) return std::nullopt;
+  return swx / sw;
 }
 
 }  // namespace
@@ -118,44 +149,24 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
   Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
   double const h = p.refine_halfwidth_px, ds = p.profile_step_px;
   int const ns = static_cast<int>(std::lround(2.0 * h / ds)) + 1;
-  std::vector<float> prof(static_cast<std::size_t>(ns));
+  std::vector<float> prof(static_cast<std::size_t>(ns)), val(static_cast<std::size_t>(ns));
   std::vector<Eigen::Vector2d> pts;
   for (double t = t0; t <= t1; t += p.refine_step_px) {
     Eigen::Vector2d const base = o + t * dir;
     bool ok = true;
     for (int i = 0; i < ns && ok; ++i) {
       Eigen::Vector2d const q = base + (-h + i * ds) * n;
-      ok = chromaAt(bgr, q.x(), q.y(), &prof[i]);
+      ok = chromaAt(bgr, q.x(), q.y(), &prof[i], &val[i]);
     }
     if (!ok) continue;
-    // Steepest descent of chroma from tissue (s < 0) into the shaft (s > 0), central differences.
-    // (Metal shafts mirror the tissue's colours, so "the first edge seen from inside" is not the
-    // rim: on the in-vivo stills it doubled the line error.)
-    int bi = -1;
-    float bg = -p.min_edge_contrast * static_cast<float>(2.0 * ds);
-    for (int i = 1; i + 1 < ns; ++i) {
-      float const g = prof[i + 1] - prof[i - 1];
-      if (g < bg) {
-        bg = g;
-        bi = i;
-      }
-    }
-    if (bi <= 1 || bi >= ns - 2) continue;  // no edge, or at the end of the profile
-    // Centroid of the slope (tissue -> shaft descents only) in a fixed window of +-2.5 px about
-    // its peak: exact for a box-filtered (anti-aliased) step under bilinear sampling, unbiased
-    // for any symmetric blur; a parabola on the peak, or a lobe cut at a fraction of it, is
-    // biased by up to 0.15 px on sharp edges.
-    double sw = 0.0, swx = 0.0;
-    int const wr = static_cast<int>(std::lround(2.5 / ds));
-    if (bi - wr < 1 || bi + wr > ns - 2) continue;  // the window would be cut: the centroid would be biased
-    for (int i = bi - wr; i <= bi + wr; ++i) {
-      double const g = -(prof[i + 1] - prof[i - 1]);
-      if (g <= 0.0) continue;
-      sw += g;
-      swx += g * i;
-    }
-    if (!(sw > 0.0)) continue;
-    double const s = -h + (swx / sw) * ds;
+    // The edge is located in chroma, where the shaded rim of a grey shaft does not bias it (metal
+    // mirrors tissue colours, so it is the steepest descent, not the first seen from inside --
+    // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
+    // little chroma contrast: then its drop in brightness is used.
+    auto at = steepestDescent(prof, ds, p.min_edge_contrast * 2.0 * ds);
+    if (!at && p.brightness_fallback_contrast > 0.0) at = steepestDescent(val, ds, p.brightness_fallback_contrast * 2.0 * ds);
+    if (!at) continue;
+    double const s = -h + *at * ds;
     pts.push_back(base + s * n);
   }
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
