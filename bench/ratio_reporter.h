@@ -21,15 +21,19 @@ class RatioReporter : public benchmark::ConsoleReporter {
       : title_(std::move(title)), reference_of_(std::move(reference_of)) {}
   void ReportRuns(std::vector<Run> const& runs) override {
     ConsoleReporter::ReportRuns(runs);
-    for (auto const& r : runs) times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
+    for (auto const& r : runs) {
+      times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
+      units_.push_back(benchmark::GetTimeUnitString(r.time_unit));
+    }
   }
   void Finalize() override {
     ConsoleReporter::Finalize();
     std::printf("\n%s\n", title_.c_str());
-    for (auto const& [n, t] : times_) {
+    for (std::size_t i = 0; i < times_.size(); ++i) {
+      auto const& [n, t] = times_[i];
       std::string const ref = reference_of_(n);
       for (auto const& [m, tr] : times_)
-        if (m == ref && tr > 0.0) std::printf("  %-45s %9.4f   (%.1f us)\n", n.c_str(), t / tr, t / 1e3);
+        if (m == ref && tr > 0.0) std::printf("  %-45s %9.4f   (%.1f %s)\n", n.c_str(), t / tr, t, units_[i]);
     }
   }
 
@@ -37,6 +41,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
   std::string title_;
   std::function<std::string(std::string const&)> reference_of_;
   std::vector<std::pair<std::string, double>> times_;
+  std::vector<char const*> units_;
 };
 
 /// main() of the benchmark programs: single thread, the reporter above.

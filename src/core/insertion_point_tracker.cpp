@@ -262,6 +262,9 @@ void InsertionPointSet::discover() {
     }
   Entry entry{next_id_, InsertionPointTracker(options_.tracker), fed_};
   if (!entry.tracker.initialise(inl, cov)) return;
+  // Admissibility is judged on the covariance-weighted estimate: the plain one is biased toward
+  // the image by the axes' angular noise (see InsertionPointTracker).
+  if (options_.admissible && !options_.admissible(entry.tracker.estimate().position)) return;
   ++next_id_;
   points_.push_back(std::move(entry));
   dropExplained();

@@ -8,8 +8,23 @@
 
 namespace endo_guidance {
 
+namespace {
+InsertionPointSetOptions withOutOfView(InsertionPointSetOptions o, Eigen::Matrix3d const& K, cv::Size size) {
+  if (o.admissible) return o;
+  // Outside the image (or behind or level with the optical centre).
+  o.admissible = [K, size](Eigen::Vector3d const& X) {
+    if (X.z() <= 1e-3) return true;
+    Eigen::Vector3d const x = K * X;
+    double const u = x.x() / x.z(), v = x.y() / x.z();
+    return u < 0.0 || v < 0.0 || u > size.width - 1.0 || v > size.height - 1.0;
+  };
+  return o;
+}
+}  // namespace
+
 Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params)
-    : K_(K), size_(size), params_(params), segmenter_(params.segmentation), points_(params.insertion_points) {}
+    : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
+      points_(withOutOfView(params.insertion_points, K, size)) {}
 
 namespace {
 // The image axis of a contour: the bisector of its two lines (normals point inward).

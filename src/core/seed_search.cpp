@@ -35,7 +35,7 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
   if (n < 8) return seeds;
   double const cos_max = std::cos(p.near_angle_deg * M_PI / 180.0);
   // Profile along the border, 3-tap smoothed; per-point threshold (relaxed near trocar arcs) and
-  // relative to the local background: the median of the profile over a window of the border
+  // relative to the local background: the upper quartile of the profile over a window of the border
   // (dark, vignetted tissue near the border is low in absolute terms; the shaft is lower still).
   std::vector<float> v(static_cast<std::size_t>(n)), sm(static_cast<std::size_t>(n));
   std::vector<int> facing(static_cast<std::size_t>(n), -1);
@@ -48,14 +48,17 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
   for (int i = 0; i < n; i += 4) {  // every 4th point, then held: the background varies slowly
     win.clear();
     for (int j = -half; j <= half; j += 2) win.push_back(sm[((i + j) % n + n) % n]);
-    std::nth_element(win.begin(), win.begin() + win.size() / 2, win.end());
-    for (int k = i; k < std::min(n, i + 4); ++k) background[k] = win[win.size() / 2];
+    // The 75th percentile: a wide shaft crossing the border must not pull the tissue level down.
+    std::size_t const q = win.size() * 3 / 4;
+    std::nth_element(win.begin(), win.begin() + static_cast<long>(q), win.end());
+    for (int k = i; k < std::min(n, i + 4); ++k) background[k] = win[q];
   }
   for (int i = 0; i < n; ++i) {
     if (!trocars.empty()) facing[i] = facingTrocar(fov.border[i], fov.centre, trocars, cos_max);
     float const abs_t = facing[i] >= 0 ? p.near_threshold : p.threshold;
     float thr = abs_t;
-    if (p.relative_threshold > 0.0)
+    // Where the border is dark (vignetting), relative to the local tissue level.
+    if (p.relative_threshold > 0.0 && background[i] < p.dark_border_level)
       thr = std::min(abs_t, std::max(static_cast<float>(p.relative_threshold) * background[i], static_cast<float>(p.min_threshold)));
     low[i] = sm[i] <= thr;
   }

@@ -81,7 +81,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // Growth levels: the absolute thresholds, capped between the seed's and the tissue's levels.
     std::vector<int> T = params_.regions.thresholds;
     auto const& fr = params_.regions.background_fractions;
-    if (seed.background > seed.mean_value + 4.f)  // only where the tissue around is brighter
+    // only on a dark border, and where the tissue around is brighter than the seed
+    if (seed.background < params_.regions.dark_border_level && seed.background > seed.mean_value + 4.f)
       for (std::size_t i = 0; i < T.size() && i < fr.size(); ++i) {
         int const rel = static_cast<int>(std::lround(seed.mean_value + fr[i] * (seed.background - seed.mean_value)));
         T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered

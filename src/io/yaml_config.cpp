@@ -85,6 +85,9 @@ void loadPipelineYaml(std::string const& path, PipelineParams& p) {
       {"segmentation/seed_threshold", i(S.seeds.threshold)},
       {"segmentation/seed_near_threshold", i(S.seeds.near_threshold)},
       {"segmentation/seed_relative_threshold", d(S.seeds.relative_threshold)},
+      {"segmentation/dark_border_level", Setter([&S](YAML::Node const& n) {
+         S.seeds.dark_border_level = S.regions.dark_border_level = n.as<double>();
+       })},
       {"segmentation/grow_background_fractions",
        Setter([&S](YAML::Node const& n) { S.regions.background_fractions = n.as<std::vector<double>>(); })},
       {"segmentation/grow_thresholds", Setter([&S](YAML::Node const& n) { S.regions.thresholds = n.as<std::vector<int>>(); })},

@@ -20,6 +20,7 @@
 #include <sstream>
 #include <string>
 
+#include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/pipeline.h"
 #include "tool_util.h"
 #include "endo_guidance/core/segmentation.h"
@@ -52,7 +53,6 @@ struct InvivoStats {
 };
 
 bool verbose = false;
-bool dark_border = false;
 
 void evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area) {
   InvivoStats st;
@@ -237,10 +237,6 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     PipelineParams pp;
     pp.segmentation = sp;
     pp.radius = 0.004;
-    if (dark_border) {  // config/dark_border.yaml
-      pp.segmentation.seeds.relative_threshold = 0.7;
-      pp.segmentation.regions.background_fractions = {0.4, 0.52, 0.64, 0.76, 0.88};
-    }
     Pipeline pipe(K, cv::Size(720, 576), pp);
     std::vector<double> ang, dist;
     int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0;
@@ -250,9 +246,11 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::map<int, std::vector<Eigen::Vector3d>> trocar_track;  // id -> positions over the second half
     std::map<int, Eigen::Vector3d> trocar_image;
     PipelineOutput out;
+    std::vector<PluckerLine> all_axes;
     while (cap.read(im)) {
       if (im.size() != cv::Size(720, 576)) break;
       out = pipe.process(im);
+      for (auto const& o : out.instruments) all_axes.push_back(o.pose.axis);
       if (frame > 185)
         for (auto const& p : out.insertion_points) {
           trocar_track[p.id].push_back(p.estimate.position);
@@ -303,7 +301,16 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                 static_cast<double>(dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
                 percentile(dist, 0.5), percentile(dist, 0.9), percentile(ang, 0.5), percentile(ang, 0.9));
-    std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:\n", frame - 1);
+    std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:%s\n", frame - 1,
+                trocar_track.empty() ? " none discovered" : "");
+    if (verbose && all_axes.size() >= 2) {
+      auto const e = intersectAxesRobust(all_axes);
+      Eigen::Vector3d const ip = K * e.position;
+      std::printf("  (diagnostic: robust common point of all %zu reported axes: %s (%.0f, %.0f, %.0f) mm, %zu inliers, "
+                  "rms %.1f mm, spread %.1f deg, image (%.0f, %.0f))\n", all_axes.size(), toString(e.status),
+                  e.position.x() * 1e3, e.position.y() * 1e3, e.position.z() * 1e3, e.inliers.size(), e.rms_distance * 1e3,
+                  std::asin(std::min(1.0, e.conditioning)) * 180 / M_PI, ip.x() / ip.z(), ip.y() / ip.z());
+    }
     for (auto const& [id, v] : trocar_track) {
       if (v.size() < 10) continue;
       Eigen::Vector3d m = Eigen::Vector3d::Zero();
@@ -345,10 +352,9 @@ int main(int argc, char** argv) {
     else if (a == "--min-area" && i + 1 < argc) min_area = std::atoi(argv[++i]);
     else if (a == "--invivo-only") robotic = false;
     else if (a == "--verbose") verbose = true;
-    else if (a == "--dark-border") dark_border = true;
     else if (a == "--robotic-only") invivo = false;
     else {
-      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--dark-border] [--verbose]\n");
+      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n");
       return 2;
     }
   }

@@ -32,8 +32,9 @@ Stats run(RenderOptions const& ro, int frames) {
       for (std::size_t j = 0; j < res.contours.size(); ++j) {
         auto const& c = res.contours[j];
         Eigen::Vector2d const m = 0.5 * (c.entry_px + c.tip_px);
-        if (used[j] || std::abs(ta.dot(Eigen::Vector3d(m.x(), m.y(), 1))) > 10.0 ||
-            std::abs(ta.dot(Eigen::Vector3d(c.entry_px.x(), c.entry_px.y(), 1))) > 10.0)
+        // As endo_guidance_eval_synthetic: the mean distance of entry and midpoint to the true axis.
+        if (used[j] || 0.5 * (std::abs(ta.dot(Eigen::Vector3d(m.x(), m.y(), 1))) +
+                              std::abs(ta.dot(Eigen::Vector3d(c.entry_px.x(), c.entry_px.y(), 1)))) > 12.0)
           continue;
         used[j] = true;
         ++s.found;

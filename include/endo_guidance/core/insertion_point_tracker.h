@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <deque>
+#include <functional>
 #include <vector>
 
 #include "endo_guidance/core/insertion_point.h"
@@ -111,10 +112,14 @@ struct InsertionPointSetOptions {
   std::size_t pool_size = 400;        ///< unattached axes kept for discovering new points
   std::size_t discover_min_inliers = 15;  ///< axes agreeing on a new point before it is created
   double discover_min_spread = 0.02;  ///< rad: and their angular spread
-  double discover_max_rms = 0.006;    ///< metres: and their RMS distance (the tips' region, where all
+  double discover_max_rms = 0.012;    ///< metres: and their RMS distance (the tips' region, where all
                                       ///< shafts pass within a few cm, is not a trocar)
   std::size_t discover_every = 10;    ///< try discovery every N unattached axes
   InsertionPointTrackerOptions tracker;
+  /// Where an insertion point may be (camera frame); empty = anywhere. The pipeline requires it
+  /// to lie outside the field of view: a trocar is in the abdominal wall, instruments enter the
+  /// view from it (a cluster of axes inside the view is where the tips meet, not a trocar).
+  std::function<bool(Eigen::Vector3d const&)> admissible;
 };
 
 /// Several insertion points: each new axis is attached (Eq. (6)) to the nearest tracked point

@@ -18,7 +18,8 @@ struct RegionGrowingParams {
   /// The levels actually tried for a seed are min(threshold, seed + f (background - seed)) for the
   /// fractions below (paired with `thresholds`): between the shaft's and the tissue's levels where
   /// the border is dark, the absolute levels where it is bright.
-  std::vector<double> background_fractions{};  // off by default (config/dark_border.yaml turns it on)
+  std::vector<double> background_fractions{0.4, 0.52, 0.64, 0.76, 0.88};
+  double dark_border_level = 45.0;  ///< the fractions apply to seeds whose border background is below this
   int min_area = 40;               ///< processing px: smaller regions are not shafts
   double max_area_fraction = 0.35; ///< of the field of view: larger ones have leaked into tissue
   int max_regions = 8;             ///< accepted regions per frame

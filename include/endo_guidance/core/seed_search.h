@@ -15,9 +15,11 @@ struct SeedSearchParams {
   int min_width = 3;           ///< run length (processing px) for a seed
   double max_width_fraction = 0.35;  ///< of the border length: longer runs are dark surround/shadow
   double near_angle_deg = 50.0;      ///< half-angle of the arc, seen from the FOV centre, facing a trocar image
-  double relative_threshold = 0.0;   ///< > 0: and at most this fraction of the local border background (median); off by default
+  double relative_threshold = 0.7;   ///< where the border is dark: at most this fraction of the local border
+                                     ///< background (upper quartile) too (0: never)
+  double dark_border_level = 45.0;   ///< the border is dark where its local background feature is below this
   int min_threshold = 6;             ///< the relative threshold never goes below this
-  double background_window = 0.125;  ///< fraction of the border over which the background median is taken
+  double background_window = 0.125;  ///< fraction of the border over which the background is taken
 };
 
 /// A place where a shaft enters the field of view: a run of low feature values along the border.
@@ -26,7 +28,7 @@ struct Seed {
   int begin = 0, end = 0;      ///< run indices along FieldOfView::border (end exclusive, may wrap)
   int width = 0;               ///< run length
   float mean_value = 0.f;      ///< mean feature value over the run
-  float background = 0.f;      ///< median feature value of the border around it (the tissue's level)
+  float background = 0.f;      ///< upper-quartile feature value of the border around it (the tissue's level)
   int insertion_point = -1;    ///< index of the trocar image whose arc it is on, or -1
 };
 
