@@ -54,7 +54,13 @@ struct InvivoStats {
 
 bool verbose = false;
 
-void evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area) {
+struct InvivoChecks {
+  double min_found = -1.0, max_line_px = -1.0, max_false_per_image = -1.0;
+};
+
+// Returns false when a requested regression bound is violated.
+bool evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area,
+                InvivoChecks const& chk) {
   InvivoStats st;
   std::vector<fs::path> files;
   for (std::string op : {"OP1", "OP2"}) {
@@ -203,6 +209,17 @@ void evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   std::printf("\n");
   std::printf("  contour line to mask boundary: median of per-shaft medians %.2f px, p90 %.2f px; all boundary px: median %.2f px, p95 %.2f px\n",
               percentile(st.line_median_px, 0.5), percentile(st.line_median_px, 0.9), percentile(st.all_dist_px, 0.5), percentile(st.all_dist_px, 0.95));
+  bool ok = true;
+  double const found = static_cast<double>(st.found) / std::max(1, st.shafts);
+  double const fpi = static_cast<double>(st.false_shafts) / std::max(1, st.images);
+  double const line = percentile(st.line_median_px, 0.5);
+  if (chk.min_found >= 0.0 && !(found >= chk.min_found)) ok = false;
+  if (chk.max_line_px >= 0.0 && !(line <= chk.max_line_px)) ok = false;
+  if (chk.max_false_per_image >= 0.0 && !(fpi <= chk.max_false_per_image)) ok = false;
+  if (chk.min_found >= 0.0 || chk.max_line_px >= 0.0 || chk.max_false_per_image >= 0.0)
+    std::printf("  regression bounds (found >= %.2f, line <= %.2f px, false/image <= %.3f): %s\n", chk.min_found,
+                chk.max_line_px, chk.max_false_per_image, ok ? "met" : "VIOLATED");
+  return ok;
 }
 
 void evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp) {
@@ -344,6 +361,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
 int main(int argc, char** argv) {
   std::string data = "../shared/data", overlay;
   int min_area = 1500;
+  InvivoChecks chk;
   bool invivo = true, robotic = true;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
@@ -352,9 +370,13 @@ int main(int argc, char** argv) {
     else if (a == "--min-area" && i + 1 < argc) min_area = std::atoi(argv[++i]);
     else if (a == "--invivo-only") robotic = false;
     else if (a == "--verbose") verbose = true;
+    else if (a == "--min-found" && i + 1 < argc) chk.min_found = std::atof(argv[++i]);
+    else if (a == "--max-line-px" && i + 1 < argc) chk.max_line_px = std::atof(argv[++i]);
+    else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
     else if (a == "--robotic-only") invivo = false;
     else {
-      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n");
+      std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
+                           "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
       return 2;
     }
   }
@@ -363,7 +385,8 @@ int main(int argc, char** argv) {
     return 0;
   }
   SegmentationParams sp;
-  if (invivo) evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area);
+  bool ok = true;
+  if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk);
   if (robotic) evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp);
-  return 0;
+  return ok ? 0 : 1;
 }
