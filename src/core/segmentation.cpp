@@ -43,6 +43,7 @@ void InstrumentSegmenter::setParams(SegmentationParams const& p) {
   params_ = p;
   if (new_colour) colour_ = ColourFeature(p.feature);
   fov_size_ = cv::Size();  // re-detect
+  memory_.clear();         // its levels index the old threshold list
 }
 
 SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars) {
@@ -57,6 +58,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   if (small_.size() != fov_size_ || ++frames_since_fov_ >= params_.fov_refresh) {
     fov_ = detectFieldOfView(small_, params_.fov);
     fov_size_ = small_.size();
+    fov_area_ = cv::countNonZero(fov_.mask);
     frames_since_fov_ = 0;
   }
   colour_.compute(small_, raw_);
@@ -68,7 +70,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
   grower_.reset(filtered_, fov_);
-  double const max_area = params_.regions.max_area_fraction * cv::countNonZero(fov_.mask);
+  double const max_area = params_.regions.max_area_fraction * fov_area_;
   for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     Seed const& seed = res.seeds[si];

@@ -60,6 +60,7 @@ class InstrumentSegmenter {
   ColourFeature colour_;
   FieldOfView fov_;
   cv::Size fov_size_;
+  double fov_area_ = 0.0;
   int frames_since_fov_ = 0;
   struct Memory {           // what a seed near `entry` gave in the last frame
     cv::Point entry;        // processing px
