@@ -461,8 +461,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     std::vector<cv::Point> q;
     for (Eigen::Vector2d const& e : {entry, tip})
       for (int k = 0; k < 2; ++k) {
-        Eigen::Vector2d const n = c.lines[k].head<2>();
-        Eigen::Vector2d const foot = e - n * c.lines[k].dot(Eigen::Vector3d(e.x(), e.y(), 1.0));
+        Eigen::Vector2d const foot = footOnLine(c.lines[k], e);
         Eigen::Vector2d const ps = (foot - Eigen::Vector2d(off, off)) / scale;  // to processing px
         q.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
       }

@@ -26,15 +26,6 @@ Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const
     : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
       points_(withOutOfView(params.insertion_points, K, size)) {}
 
-namespace {
-// The image axis of a contour: the bisector of its two lines (normals point inward).
-Eigen::Vector3d axisLine(ApparentContour const& c) {
-  Eigen::Vector3d const a = c.lines[0] - c.lines[1];
-  double const n = a.head<2>().norm();
-  return n > 1e-12 ? Eigen::Vector3d(a / n) : Eigen::Vector3d(c.lines[0]);
-}
-}  // namespace
-
 PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   auto const t0 = std::chrono::steady_clock::now();
   PipelineOutput out;
@@ -79,12 +70,12 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   // Tracks: nearest previous shaft by image axis (angle and distance of its entry and tip).
   std::vector<bool> used(previous_.size(), false);
   for (auto& o : out.instruments) {
-    Eigen::Vector3d const l = axisLine(o.contour);
+    Eigen::Vector3d const l = imageAxis(o.contour);
     int best = -1;
     double bd = params_.track_max_distance_px;
     for (std::size_t j = 0; j < previous_.size(); ++j) {
       if (used[j]) continue;
-      Eigen::Vector3d const lp = axisLine(previous_[j].contour);
+      Eigen::Vector3d const lp = imageAxis(previous_[j].contour);
       double const ang = std::acos(std::min(1.0, std::abs(l.head<2>().dot(lp.head<2>())))) * 180.0 / M_PI;
       if (ang > params_.track_max_angle_deg) continue;
       Eigen::Vector2d const& e = previous_[j].contour.entry_px;

@@ -169,7 +169,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
         for (int k = 0; k < 2; ++k) {
           Eigen::Vector2d const n = c.lines[k].head<2>();
-          Eigen::Vector2d const f = e - n * (c.lines[k].dot(Eigen::Vector3d(e.x(), e.y(), 1.0)) + 2.0 * scale);
+          Eigen::Vector2d const f = footOnLine(c.lines[k], e) - n * (2.0 * scale);
           strip.emplace_back(static_cast<int>(std::lround((f.x() - off) / scale)), static_cast<int>(std::lround((f.y() - off) / scale)));
         }
       std::swap(strip[2], strip[3]);
@@ -207,9 +207,8 @@ void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vec
     Eigen::Vector2d const e = c.entry_px, t = c.tip_px;
     for (int k = 0; k < 2; ++k) {
       // Draw each line between the feet of the entry and the tip.
-      Eigen::Vector2d const n = c.lines[k].head<2>();
-      Eigen::Vector2d const a = e - n * c.lines[k].dot(Eigen::Vector3d(e.x(), e.y(), 1));
-      Eigen::Vector2d const b = t - n * c.lines[k].dot(Eigen::Vector3d(t.x(), t.y(), 1));
+      Eigen::Vector2d const a = footOnLine(c.lines[k], e);
+      Eigen::Vector2d const b = footOnLine(c.lines[k], t);
       cv::line(img, {static_cast<int>(a.x()), static_cast<int>(a.y())}, {static_cast<int>(b.x()), static_cast<int>(b.y())},
                k == 0 ? cv::Scalar(0, 255, 0) : cv::Scalar(255, 0, 255), 2, cv::LINE_AA);
     }

@@ -69,8 +69,8 @@ std::vector<SyntheticView> SyntheticScene::frame(int k) {
     for (int j = 0; j < 2; ++j) {
       ImageLine const& l = (*lines)[j];
       Eigen::Vector2d const n = l.head<2>();
-      Eigen::Vector2d p = entry - n * l.dot(Eigen::Vector3d(entry.x(), entry.y(), 1.0));
-      Eigen::Vector2d q = tip_px - n * l.dot(Eigen::Vector3d(tip_px.x(), tip_px.y(), 1.0));
+      Eigen::Vector2d p = footOnLine(l, entry);
+      Eigen::Vector2d q = footOnLine(l, tip_px);
       Eigen::Vector2d const p0 = p, q0 = q;
       double const s = options_.line_noise_px;
       if (s > 0.0) {

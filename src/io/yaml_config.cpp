@@ -21,6 +21,14 @@ Eigen::Matrix3d CameraModel::rectifiedK() const {
 }
 
 namespace {
+YAML::Node loadFile(std::string const& path, char const* what) {
+  try {
+    return YAML::LoadFile(path);
+  } catch (std::exception const& e) {
+    throw std::runtime_error(std::string("cannot read ") + what + " '" + path + "': " + e.what());
+  }
+}
+
 std::vector<double> matrixData(YAML::Node const& n, std::string const& key, std::size_t expect) {
   YAML::Node const m = n[key];
   if (!m || !m["data"]) throw std::runtime_error("camera YAML: missing '" + key + ".data'");
@@ -33,12 +41,7 @@ std::vector<double> matrixData(YAML::Node const& n, std::string const& key, std:
 }  // namespace
 
 CameraModel loadCameraYaml(std::string const& path) {
-  YAML::Node n;
-  try {
-    n = YAML::LoadFile(path);
-  } catch (std::exception const& e) {
-    throw std::runtime_error("cannot read camera YAML '" + path + "': " + e.what());
-  }
+  YAML::Node const n = loadFile(path, "camera YAML");
   CameraModel c;
   if (!n["image_width"] || !n["image_height"]) throw std::runtime_error("camera YAML: missing image_width/image_height");
   c.width = n["image_width"].as<int>();
@@ -60,12 +63,7 @@ CameraModel loadCameraYaml(std::string const& path) {
 }
 
 void loadPipelineYaml(std::string const& path, PipelineParams& p) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (std::exception const& e) {
-    throw std::runtime_error("cannot read parameters YAML '" + path + "': " + e.what());
-  }
+  YAML::Node const root = loadFile(path, "parameters YAML");
   // key -> setter. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
   using Setter = std::function<void(YAML::Node const&)>;
   auto d = [](double& x) { return Setter([&x](YAML::Node const& n) { x = n.as<double>(); }); };

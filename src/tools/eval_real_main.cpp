@@ -37,8 +37,7 @@ std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {
   std::vector<cv::Point> poly;
   for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
     for (int k = 0; k < 2; ++k) {
-      Eigen::Vector2d const n = c.lines[k].head<2>();
-      Eigen::Vector2d const f = q - n * c.lines[k].dot(Eigen::Vector3d(q.x(), q.y(), 1.0));
+      Eigen::Vector2d const f = footOnLine(c.lines[k], q);
       poly.emplace_back(static_cast<int>(std::lround(f.x())), static_cast<int>(std::lround(f.y())));
     }
   std::swap(poly[2], poly[3]);  // entry-left, entry-right, tip-right, tip-left
@@ -284,8 +283,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
           double best = 1e9, ba = 0.0;
           for (auto const& c : r.contours) {
             // Image axis: the bisector of the two contour lines (their normals point inward).
-            Eigen::Vector3d const axis = c.lines[0] - c.lines[1];
-            Eigen::Vector3d const l = axis / axis.head<2>().norm();
+            Eigen::Vector3d const l = imageAxis(c);
             double const e = 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1))));
             Eigen::Vector2d const dl(-l.y(), l.x());
             double const an = std::acos(std::min(1.0, std::abs(dl.dot(da)))) * 180.0 / M_PI;

@@ -27,10 +27,6 @@ namespace {
 
 using tools::percentile;
 
-Eigen::Vector3d axisOf(ApparentContour const& c) {
-  Eigen::Vector3d const a = c.lines[0] - c.lines[1];
-  return a / a.head<2>().norm();
-}
 
 // Mean distance to a true image axis of a detection's entry and of its midpoint (the tip may sit
 // at the end of a jaw, off the axis).
@@ -41,10 +37,7 @@ double axisDistance(Eigen::Vector3d const& ta, ApparentContour const& c) {
 
 // RMS over the truth segment of the distance of the true line to the estimated one.
 double lineError(ImageLine const& est, ImageLine const& truth, Eigen::Vector2d const& entry, Eigen::Vector2d const& tip) {
-  auto foot = [&](Eigen::Vector2d const& q) {
-    return Eigen::Vector3d((q - truth.head<2>() * truth.dot(Eigen::Vector3d(q.x(), q.y(), 1))).x(),
-                           (q - truth.head<2>() * truth.dot(Eigen::Vector3d(q.x(), q.y(), 1))).y(), 1.0);
-  };
+  auto foot = [&](Eigen::Vector2d const& q) { return footOnLine(truth, q).homogeneous().eval(); };
   double const a = est.dot(foot(entry)), b = est.dot(foot(tip));
   return std::sqrt((a * a + a * b + b * b) / 3.0);
 }
@@ -79,13 +72,13 @@ Result run(Scene const& s, int frames, bool overlay) {
     std::vector<bool> used(out.segmentation.contours.size(), false);
     R.visible += static_cast<int>(views.size());
     for (auto const& v : views) {
-      Eigen::Vector3d const ta = axisOf(v.truth);
+      Eigen::Vector3d const ta = imageAxis(v.truth);
       int best = -1;
       double bd = 12.0;
       for (std::size_t j = 0; j < out.segmentation.contours.size(); ++j) {
         if (used[j]) continue;
         auto const& c = out.segmentation.contours[j];
-        Eigen::Vector3d const da = axisOf(c);
+        Eigen::Vector3d const da = imageAxis(c);
         if (std::abs(ta.head<2>().dot(da.head<2>())) < std::cos(5.0 * M_PI / 180.0)) continue;
         double const d = axisDistance(ta, c);
         if (d < bd) {
@@ -112,7 +105,7 @@ Result run(Scene const& s, int frames, bool overlay) {
       for (auto const& o : out.instruments) {
         bool ok = false;
         for (auto const& v : views) {
-          Eigen::Vector3d const ta = axisOf(v.truth);
+          Eigen::Vector3d const ta = imageAxis(v.truth);
           ok |= axisDistance(ta, o.contour) < 12.0;
         }
         R.false_late += ok ? 0 : 1;

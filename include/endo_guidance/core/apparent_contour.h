@@ -30,6 +30,19 @@ struct ApparentContour {
   int track_id = -1;
 };
 
+/// Foot of the perpendicular from pixel q to the normalised line l.
+inline Eigen::Vector2d footOnLine(ImageLine const& l, Eigen::Vector2d const& q) {
+  return q - l.head<2>() * l.dot(Eigen::Vector3d(q.x(), q.y(), 1.0));
+}
+
+/// The image of the shaft's axis: the bisector of the two contour lines (their normals point
+/// inward, so l0 - l1 vanishes where the distances to both are equal), normalised.
+inline ImageLine imageAxis(ApparentContour const& c) {
+  Eigen::Vector3d const a = c.lines[0] - c.lines[1];
+  double const n = a.head<2>().norm();
+  return n > 1e-12 ? ImageLine(a / n) : c.lines[0];
+}
+
 /// Scales l so that a^2 + b^2 = 1, keeping its orientation. nullopt if a = b = 0 or not finite.
 std::optional<ImageLine> normalizeLine(Eigen::Vector3d const& l);
 
