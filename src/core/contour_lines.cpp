@@ -54,6 +54,39 @@ std::optional<Eigen::Vector3d> fitLineLS(std::vector<Eigen::Vector2d> const& pts
   return Eigen::Vector3d(n.x(), n.y(), -n.dot(c));
 }
 
+// Residual, inliers and covariance of the line l fitted to weighted points (weight 0 = outlier).
+std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<Eigen::Vector2d> const& pts,
+                                         std::vector<double> const& w, int min_points) {
+  RefinedLine out;
+  out.line = l;
+  double sw = 0.0, ss = 0.0, st = 0.0, st2 = 0.0;
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  int used = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    if (w[i] <= 0.0) continue;
+    double const e = l.head<2>().dot(pts[i]) + l.z();
+    ss += w[i] * e * e;
+    sw += w[i];
+    c += w[i] * pts[i];
+    out.inliers.push_back(pts[i]);
+    ++used;
+  }
+  if (used < min_points || sw <= 0.0) return std::nullopt;
+  c /= sw;
+  Eigen::Vector2d const ld(-l.y(), l.x());
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (w[i] > 0.0) {
+      double const t = ld.dot(pts[i] - c);
+      st += w[i] * t * t;
+      st2 += w[i];
+    }
+  out.residual_px = std::sqrt(ss / sw);
+  out.points = used;
+  double const s2 = std::max(out.residual_px * out.residual_px, 0.01 * 0.01) * used / std::max(1, used - 2);
+  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw), s2 / used);
+  return out;
+}
+
 // Bilinear sample of the chroma of a BGR image at (x, y); false outside.
 bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value = nullptr) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
@@ -188,33 +221,7 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
     }
   }
   if (l.head<2>().dot(n) < 0.0) l = -l;  // keep the shaft on the positive side
-  RefinedLine out;
-  out.line = l;
-  double sw = 0.0, ss = 0.0, st = 0.0, st2 = 0.0;
-  Eigen::Vector2d c = Eigen::Vector2d::Zero();
-  int used = 0;
-  for (std::size_t i = 0; i < pts.size(); ++i) {
-    if (w[i] <= 0.0) continue;
-    double const e = l.head<2>().dot(pts[i]) + l.z();
-    ss += w[i] * e * e;
-    sw += w[i];
-    c += w[i] * pts[i];
-    ++used;
-  }
-  if (used < p.min_edge_points || sw <= 0.0) return std::nullopt;
-  c /= sw;
-  Eigen::Vector2d const ld(-l.y(), l.x());
-  for (std::size_t i = 0; i < pts.size(); ++i)
-    if (w[i] > 0.0) {
-      double const t = ld.dot(pts[i] - c);
-      st += w[i] * t * t;
-      st2 += w[i];
-    }
-  out.residual_px = std::sqrt(ss / sw);
-  out.points = used;
-  double const s2 = std::max(out.residual_px * out.residual_px, 0.01 * 0.01) * used / std::max(1, used - 2);
-  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw), s2 / used);
-  return out;
+  return summarizeLine(l, pts, w, p.min_edge_points);
 }
 
 namespace {
@@ -403,6 +410,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   c.lines = {ref[L].line, ref[1 - L].line};
   c.line_covariances = {ref[L].covariance, ref[1 - L].covariance};
   c.line_residual_px = {ref[L].residual_px, ref[1 - L].residual_px};
+  fit.edges = {ref[L].inliers, ref[1 - L].inliers};
   c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
   // Tip: the region point farthest from the entry along the axis, among those inside the strip
   // between the lines (not the jaws' spread, nor a touching instrument beyond the tip).
@@ -517,6 +525,41 @@ double scoreSides(SideFit const& sides, cv::Mat const& bgr, ContourLinesParams c
 ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr, int scale,
                               ContourLinesParams const& p) {
   return refineContour(fitSides(region, fov, scale, p), region, fov, bgr, scale, p);
+}
+
+std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
+                                              std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                                              std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
+                                              int min_points) {
+  ApparentContour out = contour;
+  out.entry_px = rectify(contour.entry_px);
+  out.tip_px = rectify(contour.tip_px);
+  // A point inside the shaft (between the lines, half-way along): it stays inside after the
+  // mapping and orients the refitted lines.
+  Eigen::Vector2d const mid = 0.5 * (contour.entry_px + contour.tip_px);
+  Eigen::Vector2d const inside = rectify(0.5 * (footOnLine(contour.lines[0], mid) + footOnLine(contour.lines[1], mid)));
+  for (int s = 0; s < 2; ++s) {
+    std::vector<Eigen::Vector2d> pts;
+    pts.reserve(edges[s].size());
+    for (auto const& q : edges[s]) {
+      Eigen::Vector2d const r = rectify(q);
+      if (r.allFinite()) pts.push_back(r);
+    }
+    if (static_cast<int>(pts.size()) < min_points) return std::nullopt;
+    auto l = fitLineLS(pts);
+    if (!l) return std::nullopt;
+    if (l->head<2>().dot(inside) + l->z() < 0.0) *l = -*l;
+    auto const r = summarizeLine(*l, pts, std::vector<double>(pts.size(), 1.0), min_points);
+    if (!r) return std::nullopt;
+    out.lines[s] = r->line;
+    out.line_covariances[s] = r->covariance;
+    out.line_residual_px[s] = r->residual_px;
+  }
+  out.residual_px = std::sqrt(0.5 * (out.line_residual_px[0] * out.line_residual_px[0] +
+                                     out.line_residual_px[1] * out.line_residual_px[1]));
+  Eigen::Vector3d const in(inside.x(), inside.y(), 1.0);
+  if (!(out.lines[0].dot(in) > 0.0 && out.lines[1].dot(in) > 0.0)) return std::nullopt;
+  return out;
 }
 
 }  // namespace endo_guidance

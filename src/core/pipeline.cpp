@@ -8,8 +8,7 @@
 
 namespace endo_guidance {
 
-namespace {
-InsertionPointSetOptions withOutOfView(InsertionPointSetOptions o, Eigen::Matrix3d const& K, cv::Size size) {
+InsertionPointSetOptions outOfViewOptions(InsertionPointSetOptions o, Eigen::Matrix3d const& K, cv::Size size) {
   if (o.admissible) return o;
   // Outside the image (or behind or level with the optical centre).
   o.admissible = [K, size](Eigen::Vector3d const& X) {
@@ -20,11 +19,41 @@ InsertionPointSetOptions withOutOfView(InsertionPointSetOptions o, Eigen::Matrix
   };
   return o;
 }
-}  // namespace
+
+void wellConditionedImages(InsertionPointSet const& set, Eigen::Matrix3d const& K, std::vector<Eigen::Vector3d>* images,
+                           std::vector<int>* ids) {
+  images->clear();
+  if (ids) ids->clear();
+  for (auto const& p : set.points())
+    if (p.tracker.wellConditioned()) {
+      images->push_back(projectPointHomogeneous(K, p.tracker.estimate().position));
+      if (ids) ids->push_back(p.id);
+    }
+}
+
+std::vector<InsertionPointReport> reportInsertionPoints(InsertionPointSet const& set, Eigen::Matrix3d const& K) {
+  std::vector<InsertionPointReport> out;
+  for (auto const& p : set.points()) {
+    if (!p.tracker.estimate().ok()) continue;
+    InsertionPointReport rep;
+    rep.id = p.id;
+    rep.estimate = p.tracker.estimate();
+    rep.image_point = projectPointHomogeneous(K, rep.estimate.position);
+    rep.well_conditioned = p.tracker.wellConditioned();
+    out.push_back(rep);
+  }
+  return out;
+}
+
+int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep) {
+  int const id = set.update(pose.axis, pose.covariance);  // Eq. (6) + tracking
+  *keep = !(reject_unattached && established && id < 0);
+  return id;
+}
 
 Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params)
     : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
-      points_(withOutOfView(params.insertion_points, K, size)) {}
+      points_(outOfViewOptions(params.insertion_points, K, size)), tracker_(params.tracking) {}
 
 PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   auto const t0 = std::chrono::steady_clock::now();
@@ -40,15 +69,10 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   }
   // Images of the known, well-conditioned insertion points focus the seed search ([Doignon07] Sec. 4).
   std::vector<Eigen::Vector3d> trocar_images;
-  std::vector<int> trocar_ids;
-  bool established = false;
-  for (auto const& p : points_.points())
-    if (p.tracker.wellConditioned()) {
-      trocar_images.push_back(projectPointHomogeneous(K_, p.tracker.estimate().position));
-      trocar_ids.push_back(p.id);
-      established = true;
-    }
+  wellConditionedImages(points_, K_, &trocar_images);
+  bool const established = !trocar_images.empty();
   out.segmentation = segmenter_.process(bgr, trocar_images);
+  tracker_.assign(out.segmentation.contours);
   for (ApparentContour const& c : out.segmentation.contours) {
     CylinderPoseResult const r = estimateCylinderPose(K_, params_.radius, c, params_.pose);
     if (!r.ok()) {
@@ -58,52 +82,18 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
     InstrumentObservation o;
     o.contour = c;
     o.pose = r.pose;
-    o.insertion_point = points_.update(r.pose.axis, r.pose.covariance);  // Eq. (6) + tracking
+    bool keep = true;
+    o.insertion_point = attachAxis(points_, r.pose, params_.reject_unattached, established, &keep);
     o.contour.insertion_point_id = o.insertion_point;
-    if (params_.reject_unattached && established && o.insertion_point < 0) {
+    o.track = c.track_id;
+    if (!keep) {
       ++out.rejected_unattached;
       continue;
     }
     o.tip_c = backProjectOntoAxis(K_, r.pose.axis, c.tip_px);
     out.instruments.push_back(o);
   }
-  // Tracks: nearest previous shaft by image axis (angle and distance of its entry and tip).
-  std::vector<bool> used(previous_.size(), false);
-  for (auto& o : out.instruments) {
-    Eigen::Vector3d const l = imageAxis(o.contour);
-    int best = -1;
-    double bd = params_.track_max_distance_px;
-    for (std::size_t j = 0; j < previous_.size(); ++j) {
-      if (used[j]) continue;
-      Eigen::Vector3d const lp = imageAxis(previous_[j].contour);
-      double const ang = std::acos(std::min(1.0, std::abs(l.head<2>().dot(lp.head<2>())))) * 180.0 / M_PI;
-      if (ang > params_.track_max_angle_deg) continue;
-      Eigen::Vector2d const& e = previous_[j].contour.entry_px;
-      Eigen::Vector2d const& t = previous_[j].contour.tip_px;
-      double const d = 0.5 * (std::abs(l.dot(Eigen::Vector3d(e.x(), e.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(t.x(), t.y(), 1))));
-      if (d < bd) {
-        bd = d;
-        best = static_cast<int>(j);
-      }
-    }
-    if (best >= 0) {
-      used[best] = true;
-      o.track = previous_[best].track;
-    } else {
-      o.track = next_track_++;
-    }
-    o.contour.track_id = o.track;
-  }
-  previous_ = out.instruments;
-  for (auto const& p : points_.points()) {
-    if (!p.tracker.estimate().ok()) continue;
-    InsertionPointReport rep;
-    rep.id = p.id;
-    rep.estimate = p.tracker.estimate();
-    rep.image_point = projectPointHomogeneous(K_, rep.estimate.position);
-    rep.well_conditioned = p.tracker.wellConditioned();
-    out.insertion_points.push_back(rep);
-  }
+  out.insertion_points = reportInsertionPoints(points_, K_);
   out.latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -179,6 +179,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       ApparentContour c = *best_fit.contour;
       c.insertion_point_id = seed.insertion_point;
       res.contours.push_back(c);
+      res.edges.push_back(best_fit.edges);
     }
   }
   labels_ = grower_.labels();

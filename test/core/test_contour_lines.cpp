@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include <gtest/gtest.h>
 
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -87,4 +88,56 @@ TEST(ContourLines, RenderedShaftMatchesTruthAndBlobIsRejected) {
   cv::Mat img(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));
   cv::circle(img, {160, 239}, 60, cv::Scalar(140, 140, 140), -1, cv::LINE_AA);
   EXPECT_TRUE(InstrumentSegmenter().process(img).contours.empty());
+}
+
+TEST(ContourLines, RectifiedContourOfDistortedEdgesIsTheStraightLine) {
+  // Edge points sampled on two straight lines of the rectified camera, distorted with a strong
+  // barrel distortion (plumb_bob k1 = -0.3, k2 = 0.1), must come back as those lines.
+  cv::Matx33d const K(500, 0, 319.5, 0, 500, 239.5, 0, 0, 1);
+  cv::Vec<double, 5> const D(-0.3, 0.1, 0.001, -0.001, 0.0);
+  ApparentContour truth;
+  truth.lines = {*lineThrough({20, 60}, {400, 300}), *lineThrough({400, 330}, {20, 90})};  // shaft between
+  truth.entry_px = {20, 75};
+  truth.tip_px = {400, 315};
+  Eigen::Vector3d const mid(210, 195, 1);
+  for (auto& l : truth.lines)
+    if (l.dot(mid) < 0) l = -l;  // the shaft on the positive side
+  auto distort = [&](Eigen::Vector2d const& p) {
+    double const x = (p.x() - K(0, 2)) / K(0, 0), y = (p.y() - K(1, 2)) / K(1, 1), r2 = x * x + y * y;
+    double const rad = 1 + D[0] * r2 + D[1] * r2 * r2;
+    double const xd = x * rad + 2 * D[2] * x * y + D[3] * (r2 + 2 * x * x), yd = y * rad + D[2] * (r2 + 2 * y * y) + 2 * D[3] * x * y;
+    return Eigen::Vector2d(K(0, 0) * xd + K(0, 2), K(1, 1) * yd + K(1, 2));
+  };
+  auto rectify = [&](Eigen::Vector2d const& p) {
+    std::vector<cv::Point2d> in{{p.x(), p.y()}}, out;
+    cv::undistortPoints(in, out, K, D, cv::noArray(), K, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
+    return Eigen::Vector2d(out[0].x, out[0].y);
+  };
+  std::array<std::vector<Eigen::Vector2d>, 2> edges;
+  ApparentContour distorted = truth;
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Vector2d const a = footOnLine(truth.lines[s], truth.entry_px), b = footOnLine(truth.lines[s], truth.tip_px);
+    for (int i = 0; i <= 60; ++i) edges[s].push_back(distort(a + (b - a) * (i / 60.0)));
+    // The distorted fit: the chord of the curved edge (what the segmentation sees).
+    distorted.lines[s] = *lineThrough(edges[s].front(), edges[s].back());
+    if (distorted.lines[s].head<2>().dot(truth.lines[s].head<2>()) < 0) distorted.lines[s] = -distorted.lines[s];
+  }
+  distorted.entry_px = distort(truth.entry_px);
+  distorted.tip_px = distort(truth.tip_px);
+  // Without correction the lines are visibly wrong (the test can fail).
+  double off = 0.0;
+  for (int s = 0; s < 2; ++s) off = std::max(off, std::abs(distorted.lines[s].dot(Eigen::Vector3d(truth.tip_px.x(), truth.tip_px.y(), 1)) -
+                                                            truth.lines[s].dot(Eigen::Vector3d(truth.tip_px.x(), truth.tip_px.y(), 1))));
+  EXPECT_GT(off, 0.3);
+  auto const r = rectifyContour(distorted, edges, rectify);
+  ASSERT_TRUE(r);
+  for (int s = 0; s < 2; ++s) {
+    EXPECT_LT((r->lines[s] - truth.lines[s]).norm(), 1e-5) << s;
+    EXPECT_LT(r->line_residual_px[s], 1e-3);
+  }
+  EXPECT_LT((r->entry_px - truth.entry_px).norm(), 1e-3);
+  EXPECT_LT((r->tip_px - truth.tip_px).norm(), 1e-3);
+  // Too few points: refused, not guessed.
+  std::array<std::vector<Eigen::Vector2d>, 2> few{std::vector<Eigen::Vector2d>(edges[0].begin(), edges[0].begin() + 3), edges[1]};
+  EXPECT_FALSE(rectifyContour(distorted, few, rectify));
 }

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <map>
+#include <set>
 
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/scene_renderer.h"
@@ -57,4 +59,38 @@ TEST(Pipeline, TrocarsFromRenderedVideoAndNoGauze) {
     EXPECT_LT(best, 0.0015);
   }
   EXPECT_EQ(late_false, 0);
+}
+
+// Shaft identities: each synthetic instrument keeps one track id while it moves; a shaft that
+// appears elsewhere gets a new id.
+TEST(ShaftTracking, IdsFollowTheInstruments) {
+  SyntheticScene scene(defaultInstruments());
+  ShaftTracker tracker;
+  std::map<int, int> id_of;  // instrument -> track id
+  int switches = 0;
+  for (int k = 0; k < 100; ++k) {
+    auto const views = scene.frame(k);
+    std::vector<ApparentContour> c;
+    for (auto const& v : views) c.push_back(v.truth);
+    tracker.assign(c);
+    std::set<int> ids;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      ids.insert(c[i].track_id);
+      auto const it = id_of.find(views[i].instrument);
+      if (it != id_of.end() && it->second != c[i].track_id) ++switches;
+      id_of[views[i].instrument] = c[i].track_id;
+    }
+    EXPECT_EQ(ids.size(), views.size());  // distinct shafts, distinct ids
+  }
+  EXPECT_EQ(switches, 0);
+  EXPECT_GE(id_of.size(), 2u);
+  // A shaft far from every previous one starts a new track.
+  std::vector<ApparentContour> far{scene.frame(100).front().truth};
+  int const before = far.front().track_id;
+  far.front().lines = {*lineThrough({600, 0}, {600, 400}), *lineThrough({620, 400}, {620, 0})};
+  far.front().entry_px = {610, 0};
+  far.front().tip_px = {610, 400};
+  tracker.reset();
+  tracker.assign(far);
+  EXPECT_NE(far.front().track_id, before);
 }

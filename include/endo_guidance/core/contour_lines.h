@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <opencv2/core.hpp>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -66,6 +67,7 @@ struct RefinedLine {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
   double residual_px = 0.0;
   int points = 0;
+  std::vector<Eigen::Vector2d> inliers;  ///< the edge points behind the line (full-res pixels)
 };
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& params);
@@ -79,6 +81,7 @@ struct ContourFit {
   std::optional<ApparentContour> contour;
   ContourRejection rejection = ContourRejection::kNone;
   int edge_points = 0;  ///< sub-pixel edge points behind both lines
+  std::array<std::vector<Eigen::Vector2d>, 2> edges;  ///< those points, per contour line (contour order)
 };
 ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full, int scale,
                               ContourLinesParams const& params);
@@ -100,5 +103,15 @@ double scoreSides(SideFit const& sides, cv::Mat const& bgr_full, ContourLinesPar
 /// The second half: sub-pixel lines, order, tip and the length/width checks.
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full,
                          int scale, ContourLinesParams const& params);
+
+/// Lens distortion: the contour lines refitted (least squares, with covariance) to the edge
+/// points mapped by `rectify` (distorted pixel -> pixel of the rectified camera), the entry and
+/// tip mapped too. The image is never remapped: a straight shaft edge is a curve in the
+/// distorted image and a line again after the mapping. nullopt when a side keeps fewer than
+/// min_points mapped points or the refitted lines cross.
+std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
+                                              std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                                              std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
+                                              int min_points = 8);
 
 }  // namespace endo_guidance

@@ -10,6 +10,7 @@
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/segmentation.h"
+#include "endo_guidance/core/shaft_tracking.h"
 
 namespace endo_guidance {
 
@@ -22,8 +23,7 @@ struct PipelineParams {
   /// (Eq. (6)) is not reported (gauze, clips, tissue folds); it still feeds the discovery of new
   /// insertion points.
   bool reject_unattached = true;
-  double track_max_angle_deg = 12.0;    ///< frame-to-frame association of shafts
-  double track_max_distance_px = 25.0;
+  ShaftTrackingParams tracking;         ///< frame-to-frame association of shafts
 };
 
 /// One shaft seen in one frame.
@@ -52,6 +52,20 @@ struct PipelineOutput {
   double latency_ms = 0.0;
 };
 
+/// The insertion-point options with `admissible` set (unless given) to "outside the image of
+/// size `size` seen through K, or behind the camera": a trocar is in the abdominal wall.
+InsertionPointSetOptions outOfViewOptions(InsertionPointSetOptions options, Eigen::Matrix3d const& K, cv::Size size);
+/// Homogeneous images of the well-conditioned insertion points (they focus the seed search,
+/// [Doignon07] Sec. 4) and their ids.
+void wellConditionedImages(InsertionPointSet const& set, Eigen::Matrix3d const& K, std::vector<Eigen::Vector3d>* images,
+                           std::vector<int>* ids = nullptr);
+/// Every insertion point with an estimate, with its image through K.
+std::vector<InsertionPointReport> reportInsertionPoints(InsertionPointSet const& set, Eigen::Matrix3d const& K);
+/// The attachment stage ([Doignon07] Eq. (6) + tracking): feeds the axis to the set and returns
+/// the id of its insertion point (-1: none); *keep is false when the shaft must not be reported
+/// (reject_unattached, an established point and no attachment).
+int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep);
+
 /// The whole per-frame pipeline ([Doignon07]): segmentation (focused by the images of the
 /// insertion points) -> cylinder pose -> attachment to insertion points / discovery -> tracks.
 /// Stateful (insertion points, tracks); one instance per camera stream; not thread-safe.
@@ -71,8 +85,7 @@ class Pipeline {
   PipelineParams params_;
   InstrumentSegmenter segmenter_;
   InsertionPointSet points_;
-  std::vector<InstrumentObservation> previous_;
-  int next_track_ = 0;
+  ShaftTracker tracker_;
 };
 
 }  // namespace endo_guidance

@@ -32,6 +32,8 @@ struct SegmentationParams {
 /// What one frame gave, with the intermediate results for overlays and diagnostics.
 struct SegmentationResult {
   std::vector<ApparentContour> contours;  ///< accepted shafts (full-resolution pixels)
+  /// Per contour: the sub-pixel edge points behind each of its lines (lens-distortion correction).
+  std::vector<std::array<std::vector<Eigen::Vector2d>, 2>> edges;
   std::vector<Seed> seeds;                ///< processing-scale pixels
   std::vector<Region> regions;            ///< processing-scale pixels
   std::vector<ContourRejection> region_status;  ///< per region: kNone = accepted
