@@ -15,7 +15,7 @@
 #include "endo_guidance/core/synthetic_scene.h"
 #include "ratio_reporter.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 

@@ -17,7 +17,7 @@
 #include "endo_guidance/core/sigma_filter.h"
 #include "ratio_reporter.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <vector>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 std::optional<ImageLine> normalizeLine(Eigen::Vector3d const& l) {
   double const n = l.head<2>().norm();
@@ -76,4 +76,4 @@ std::optional<std::array<Eigen::Vector2d, 2>> clipLineToImage(ImageLine const& l
   return seg;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 namespace {
 // Keeps the nearest and second nearest; thresholds each candidate with its own tau.
@@ -67,4 +67,4 @@ Attachment classifyAxis(PluckerLine const& axis, std::vector<Eigen::Vector3d> co
   return best.result();
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

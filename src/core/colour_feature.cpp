@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 ColourFeature::ColourFeature(ColourFeatureParams const& params) : params_(params), lut_(1u << 18) {
   for (int b = 0; b < 64; ++b)
@@ -41,4 +41,4 @@ void ColourFeature::compute(cv::Mat const& bgr, cv::Mat& feature) const {
   }
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

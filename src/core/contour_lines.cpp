@@ -10,7 +10,7 @@
 
 #include "endo_guidance/core/colour_feature.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 char const* toString(ContourRejection r) {
   switch (r) {
@@ -562,4 +562,4 @@ std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
   return out;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

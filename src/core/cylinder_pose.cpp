@@ -6,7 +6,7 @@
 #include <Eigen/SVD>
 #include <cmath>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 char const* toString(CylinderPoseStatus s) {
   switch (s) {
@@ -261,4 +261,4 @@ std::optional<Eigen::Vector3d> backProjectOntoAxis(Eigen::Matrix3d const& K, Plu
   return Eigen::Vector3d(p0 + t * d);
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

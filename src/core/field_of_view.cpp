@@ -3,7 +3,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
   CV_Assert(bgr.type() == CV_8UC3);
@@ -58,4 +58,4 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
   return fov;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

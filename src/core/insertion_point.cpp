@@ -9,7 +9,7 @@
 #include <numeric>
 #include <random>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 char const* toString(InsertionPointStatus s) {
   switch (s) {
@@ -200,4 +200,4 @@ InsertionPointEstimate intersectAxesRobust(std::vector<PluckerLine> const& axes,
   return e;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

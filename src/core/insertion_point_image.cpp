@@ -6,7 +6,7 @@
 #include <cmath>
 #include <random>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 Eigen::Vector3d projectPointHomogeneous(Eigen::Matrix3d const& K, Eigen::Vector3d const& X) {
   Eigen::Vector3d x = K * X;
@@ -117,4 +117,4 @@ ImagePointEstimate intersectImageLinesRobust(std::vector<ImageLine> const& lines
   return solve(ln, lines, use, c, s);
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -9,7 +9,7 @@
 
 #include "endo_guidance/core/classification.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 InsertionPointTracker::InsertionPointTracker(InsertionPointTrackerOptions const& o)
     : options_(o), rho_(std::exp(-1.0 / std::max(1.0, o.memory_views))) {}
@@ -186,6 +186,18 @@ InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& a
 
 InsertionPointSet::InsertionPointSet(InsertionPointSetOptions const& o) : options_(o) {}
 
+void InsertionPointSet::setOptions(InsertionPointSetOptions const& o) {
+  auto admissible = options_.admissible;
+  options_ = o;
+  if (!options_.admissible) options_.admissible = admissible;
+  for (auto& p : points_) p.tracker.setOptions(o.tracker);
+}
+
+void InsertionPointTracker::setOptions(InsertionPointTrackerOptions const& o) {
+  options_ = o;
+  rho_ = std::exp(-1.0 / std::max(1.0, o.memory_views));
+}
+
 int InsertionPointSet::classify(PluckerLine const& axis, double* distance, AxisCovariance const& cov) const {
   // Eq. (6): the nearest point, in units of each point's own gate, if within it.
   int best = -1;
@@ -329,4 +341,4 @@ bool InsertionPointSet::setFrozen(int id, bool frozen) {
   return true;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

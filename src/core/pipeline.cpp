@@ -6,7 +6,7 @@
 
 #include "endo_guidance/core/insertion_point_image.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 InsertionPointSetOptions outOfViewOptions(InsertionPointSetOptions o, Eigen::Matrix3d const& K, cv::Size size) {
   if (o.admissible) return o;
@@ -98,4 +98,4 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   return out;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -3,7 +3,7 @@
 
 #include <cmath>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 std::optional<PluckerLine> PluckerLine::fromDirectionMoment(Eigen::Vector3d const& d, Eigen::Vector3d const& m) {
   double const n = d.norm();
@@ -56,4 +56,4 @@ double PluckerLine::distanceTo(PluckerLine const& o) const {
   return std::abs(d_.dot(o.m_) + o.d_.dot(m_)) / s;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -3,7 +3,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 void RegionGrower::reset(cv::Mat const& feature, FieldOfView const& fov) {
   CV_Assert(feature.type() == CV_8U && fov.mask.size() == feature.size());
@@ -60,4 +60,4 @@ void RegionGrower::claim(Region const& r, int label, std::vector<cv::Point> cons
   labels_.setTo(label, in(cv::Rect(1, 1, feature_.cols, feature_.rows)));
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 namespace {
 
@@ -156,4 +156,4 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
   return out;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

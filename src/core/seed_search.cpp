@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 namespace {
 // Index of the trocar image whose direction from the FOV centre is within the arc of p, or -1.
@@ -101,4 +101,4 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
   return seeds;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

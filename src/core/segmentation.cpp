@@ -7,7 +7,7 @@
 
 #include "endo_guidance/core/sigma_filter.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 namespace {
 // Box (area) downsampling by an integer factor, BGR: the same result as cv::resize(INTER_AREA)
@@ -231,4 +231,4 @@ void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vec
   }
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 void ShaftTracker::assign(std::vector<ApparentContour>& contours) {
   std::vector<bool> used(previous_.size(), false);
@@ -35,4 +35,4 @@ void ShaftTracker::assign(std::vector<ApparentContour>& contours) {
   previous_ = contours;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -10,7 +10,7 @@
 #include <emmintrin.h>
 #endif
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 namespace {
 
@@ -74,4 +74,4 @@ void sigmaFilter(cv::Mat const& src, cv::Mat& dst, int radius, int delta) {
   }
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -5,7 +5,7 @@
 
 #include "endo_guidance/core/cylinder_pose.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 std::vector<SyntheticInstrument> defaultInstruments() {
   std::vector<SyntheticInstrument> v(3);
@@ -91,4 +91,4 @@ std::vector<SyntheticView> SyntheticScene::frame(int k) {
   return out;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

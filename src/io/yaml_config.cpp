@@ -63,7 +63,14 @@ CameraModel loadCameraYaml(std::string const& path) {
 }
 
 void loadPipelineYaml(std::string const& path, PipelineParams& p) {
-  YAML::Node const root = loadFile(path, "parameters YAML");
+  auto const unknown = applyPipelineParams(loadFile(path, "parameters YAML"), p);
+  if (unknown.empty()) return;
+  std::string list;
+  for (auto const& k : unknown) list += " " + k;
+  throw std::runtime_error("parameters YAML '" + path + "': unknown keys:" + list);
+}
+
+std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& p) {
   // key -> setter. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
   using Setter = std::function<void(YAML::Node const&)>;
   auto d = [](double& x) { return Setter([&x](YAML::Node const& n) { x = n.as<double>(); }); };
@@ -105,19 +112,25 @@ void loadPipelineYaml(std::string const& path, PipelineParams& p) {
       {"insertion_points/min_conditioning", d(T.tracker.min_conditioning)},
       {"insertion_points/point_motion_sigma", d(T.tracker.point_motion_sigma)},
       {"insertion_points/gate_max", d(T.tracker.gate_max)},
+      {"tracking/max_angle_deg", d(p.tracking.max_angle_deg)},
+      {"tracking/max_distance_px", d(p.tracking.max_distance_px)},
   };
-  std::string unknown;
+  std::vector<std::string> unknown;
   std::function<void(YAML::Node const&, std::string const&)> walk = [&](YAML::Node const& n, std::string const& prefix) {
     for (auto const& kv : n) {
       std::string const key = prefix.empty() ? kv.first.as<std::string>() : prefix + "/" + kv.first.as<std::string>();
       auto const it = keys.find(key);
       if (it != keys.end()) it->second(kv.second);
       else if (kv.second.IsMap()) walk(kv.second, key);
-      else unknown += " " + key;
+      else unknown.push_back(key);
     }
   };
-  walk(root, "");
-  if (!unknown.empty()) throw std::runtime_error("parameters YAML '" + path + "': unknown keys:" + unknown);
+  try {
+    walk(root, "");
+  } catch (YAML::Exception const& e) {
+    throw std::runtime_error(std::string("pipeline parameters: wrong value type: ") + e.what());
+  }
+  return unknown;
 }
 
 }  // namespace endo_guidance::io

@@ -26,11 +26,11 @@
 #include "endo_guidance/core/segmentation.h"
 
 namespace fs = std::filesystem;
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 
-using tools::percentile;
+using endo_guidance::tools::percentile;
 
 // The quadrilateral between the two contour lines from the entry to the tip.
 std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {

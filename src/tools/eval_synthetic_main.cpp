@@ -21,11 +21,11 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 
-using tools::percentile;
+using endo_guidance::tools::percentile;
 
 
 // Mean distance to a true image axis of a detection's entry and of its midpoint (the tip may sit

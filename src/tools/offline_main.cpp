@@ -33,7 +33,8 @@
 #include "endo_guidance/io/yaml_config.h"
 
 namespace fs = std::filesystem;
-using namespace endo_guidance;
+using namespace endo_guidance::core;
+namespace io = endo_guidance::io;
 
 namespace {
 

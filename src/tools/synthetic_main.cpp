@@ -20,11 +20,15 @@
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/synthetic_scene.h"
 
+#include <cv_bridge/cv_bridge.h>
+#include <rosbag/bag.h>
+#include <sensor_msgs/CameraInfo.h>
+
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 void usage() {
@@ -37,8 +41,51 @@ void usage() {
       "  --check TOL_M  exit 1 unless every trocar is found within TOL_M of its mean position\n"
       "  --write-sequence DIR  render the sequence instead: DIR/frames/NNNNNN.png, DIR/camera.yaml\n"
       "                 (ROS camera_info YAML) and DIR/truth.yaml (mean trocars, metres)\n"
-      "  --scene clean|hard|black_circular  rendering for --write-sequence (default clean)\n"
+      "  --write-bag FILE  render the sequence into a bag instead (LZ4): /endoscope/image_raw (bgr8),\n"
+      "                 /endoscope/camera_info, frame endoscope_optical_frame, 25 Hz from t = 1000 s;\n"
+      "                 the truth goes to FILE's name with .truth.yaml\n"
+      "  --scene clean|hard|black_circular  rendering for --write-sequence/--write-bag (default clean)\n"
       "  --noise-sweep  print pose and insertion-point errors for line noise 0..1 px (no breathing)");
+}
+
+void writeTruth(std::ostream& truth, SyntheticScene const& scene) {
+  truth << "# mean trocar positions, camera optical frame, metres\ntrocars:\n";
+  for (std::size_t i = 0; i < scene.size(); ++i) {
+    Eigen::Vector3d const& T = scene.meanTrocar(static_cast<int>(i));
+    truth << "  - [" << T.x() << ", " << T.y() << ", " << T.z() << "]\n";
+  }
+  truth << "radius: " << defaultInstruments()[0].radius << "\n";
+}
+
+// A simulated surgery as a camera driver would record it (replay.launch's input).
+void writeBag(std::string const& path, SyntheticScene& scene, SyntheticSceneOptions const& so, RenderOptions const& ro,
+              int frames) {
+  rosbag::Bag bag(path, rosbag::bagmode::Write);
+  bag.setCompression(rosbag::compression::LZ4);
+  SceneRenderer renderer(so.width, so.height, ro);
+  sensor_msgs::CameraInfo info;
+  info.header.frame_id = "endoscope_optical_frame";
+  info.width = static_cast<std::uint32_t>(so.width);
+  info.height = static_cast<std::uint32_t>(so.height);
+  info.distortion_model = "plumb_bob";
+  info.D.assign(5, 0.0);
+  for (int i = 0; i < 9; ++i) info.K[i] = so.K(i / 3, i % 3);
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  for (int i = 0; i < 12; ++i) info.P[i] = (i % 4 == 3) ? 0.0 : so.K(i / 4, i % 4);
+  for (int k = 0; k < frames; ++k) {
+    ros::Time const t(1000.0 + k / so.fps);
+    cv_bridge::CvImage img;
+    img.header.stamp = t;
+    img.header.frame_id = info.header.frame_id;
+    img.header.seq = static_cast<std::uint32_t>(k);
+    img.encoding = "bgr8";
+    img.image = renderer.render(scene.frame(k), k);
+    info.header.stamp = t;
+    info.header.seq = img.header.seq;
+    bag.write("/endoscope/image_raw", t, img.toImageMsg());
+    bag.write("/endoscope/camera_info", t, info);
+  }
+  bag.close();
 }
 }  // namespace
 
@@ -46,7 +93,7 @@ int main(int argc, char** argv) {
   int frames = 500;
   double noise = 0.5, breathing = 0.002, check = -1.0;
   unsigned long seed = 42;
-  std::string write_dir, scene_name = "clean";
+  std::string write_dir, write_bag, scene_name = "clean";
   bool sweep = false;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
@@ -64,6 +111,7 @@ int main(int argc, char** argv) {
     else if (a == "--check") check = std::atof(next("--check"));
     else if (a == "--write-sequence") write_dir = next("--write-sequence");
     else if (a == "--scene") scene_name = next("--scene");
+    else if (a == "--write-bag") write_bag = next("--write-bag");
     else if (a == "--noise-sweep") sweep = true;
     else if (a == "-h" || a == "--help") {
       usage();
@@ -126,7 +174,7 @@ int main(int argc, char** argv) {
   so.breathing_amplitude = breathing;
   so.seed = seed;
   SyntheticScene scene(defaultInstruments(), so);
-  if (!write_dir.empty()) {
+  if (!write_dir.empty() || !write_bag.empty()) {
     // The embedded default sequence of the README's main command.
     RenderOptions ro;
     if (scene_name == "hard") {
@@ -141,6 +189,19 @@ int main(int argc, char** argv) {
       return 2;
     }
     namespace fs = std::filesystem;
+    if (!write_bag.empty()) {
+      try {
+        writeBag(write_bag, scene, so, ro, frames);
+      } catch (std::exception const& e) {
+        std::fprintf(stderr, "cannot write the bag: %s\n", e.what());
+        return 1;
+      }
+      std::string const truth_path = fs::path(write_bag).replace_extension(".truth.yaml").string();
+      std::ofstream truth(truth_path);
+      writeTruth(truth, scene);
+      std::printf("wrote %d frames (%s scene) to %s, truth to %s\n", frames, scene_name.c_str(), write_bag.c_str(), truth_path.c_str());
+      return 0;
+    }
     fs::create_directories(fs::path(write_dir) / "frames");
     SceneRenderer renderer(so.width, so.height, ro);
     for (int k = 0; k < frames; ++k) {
@@ -158,12 +219,7 @@ int main(int argc, char** argv) {
         << "projection_matrix:\n  rows: 3\n  cols: 4\n  data: [" << K(0, 0) << ", 0, " << K(0, 2) << ", 0, 0, " << K(1, 1)
         << ", " << K(1, 2) << ", 0, 0, 0, 1, 0]\n";
     std::ofstream truth(fs::path(write_dir) / "truth.yaml");
-    truth << "# mean trocar positions, camera optical frame, metres\ntrocars:\n";
-    for (std::size_t i = 0; i < scene.size(); ++i) {
-      Eigen::Vector3d const& T = scene.meanTrocar(static_cast<int>(i));
-      truth << "  - [" << T.x() << ", " << T.y() << ", " << T.z() << "]\n";
-    }
-    truth << "radius: " << defaultInstruments()[0].radius << "\n";
+    writeTruth(truth, scene);
     std::printf("wrote %d frames (%s scene) with camera.yaml and truth.yaml to %s\n", frames, scene_name.c_str(), write_dir.c_str());
     return 0;
   }

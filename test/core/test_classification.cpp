@@ -7,7 +7,7 @@
 #include "endo_guidance/core/synthetic_scene.h"
 #include "test_util.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 // Three instruments: every noisy region is attached to its own trocar, in 3D and in the image.
 TEST(Classification, ThreeInstruments) {

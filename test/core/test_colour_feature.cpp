@@ -3,7 +3,7 @@
 
 #include "endo_guidance/core/colour_feature.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(ColourFeature, GreyAndBlackAreLowTissueIsHigh) {
   ColourFeature const f;

@@ -10,7 +10,7 @@
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/segmentation.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(ContourLines, LMedSSurvivesOutliers) {
   std::mt19937_64 rng(1);

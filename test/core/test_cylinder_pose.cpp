@@ -11,7 +11,7 @@
 #include "endo_guidance/core/synthetic_scene.h"
 #include "test_util.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 using test::defaultK;
 
 namespace {

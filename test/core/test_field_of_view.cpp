@@ -5,7 +5,7 @@
 
 #include "endo_guidance/core/field_of_view.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(FieldOfView, FullRectangle) {
   cv::Mat img(120, 160, CV_8UC3, cv::Scalar(60, 80, 160));

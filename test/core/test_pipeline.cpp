@@ -8,7 +8,7 @@
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/scene_renderer.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(Pipeline, BadFramesAreReportedAndSkipped) {
   SyntheticSceneOptions so;

@@ -4,7 +4,7 @@
 #include "endo_guidance/core/plucker_line.h"
 #include "test_util.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(PluckerLine, InvariantsFromAnyInput) {
   auto L = PluckerLine::fromDirectionMoment({0, 0, 2}, {1, 1, 5});

@@ -3,7 +3,7 @@
 
 #include "endo_guidance/core/region_growing.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(RegionGrowing, GrowsBelowThresholdInsideTheView) {
   cv::Mat bgr(100, 100, CV_8UC3, cv::Scalar(60, 80, 160));

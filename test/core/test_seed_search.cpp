@@ -3,7 +3,7 @@
 
 #include "endo_guidance/core/seed_search.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 TEST(SeedSearch, LowRunsOnTheBorderBecomeSeeds) {
   cv::Mat bgr(120, 160, CV_8UC3, cv::Scalar(60, 80, 160));

@@ -8,7 +8,7 @@
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/segmentation.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 struct Stats {

@@ -5,7 +5,7 @@
 
 #include "endo_guidance/core/sigma_filter.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
 
 namespace {
 // Reference: the textbook definition, integer mean rounded to nearest.

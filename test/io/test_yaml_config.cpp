@@ -6,7 +6,8 @@
 
 #include "endo_guidance/io/yaml_config.h"
 
-using namespace endo_guidance;
+using namespace endo_guidance::core;
+namespace io = endo_guidance::io;
 
 namespace {
 std::string write(std::string const& name, std::string const& text) {

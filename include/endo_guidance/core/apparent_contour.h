@@ -6,7 +6,7 @@
 #include <array>
 #include <optional>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// An image line l = (a, b, c): a u + b v + c = 0 in pixels, normalised so a^2 + b^2 = 1
 /// (then l.(u, v, 1) is the signed distance in pixels) and oriented so that the instrument's
@@ -65,4 +65,4 @@ Eigen::Matrix3d lineCovarianceFromSegment(ImageLine const& l, Eigen::Vector2d co
 /// Clips an image line to the rectangle [0, width-1] x [0, height-1]; nullopt if it misses it.
 std::optional<std::array<Eigen::Vector2d, 2>> clipLineToImage(ImageLine const& l, int width, int height);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

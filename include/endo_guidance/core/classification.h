@@ -8,7 +8,7 @@
 #include "endo_guidance/core/apparent_contour.h"
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// Result of attaching a region to one of m insertion points, [Doignon07] Eq. (6).
 struct Attachment {
@@ -29,4 +29,4 @@ Attachment classifyImageLine(ImageLine const& l, std::vector<Eigen::Vector3d> co
 /// distance, if below tau_m (metres).
 Attachment classifyAxis(PluckerLine const& axis, std::vector<Eigen::Vector3d> const& points, double tau_m);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -5,7 +5,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// Parameters of the hue-saturation feature.
 struct ColourFeatureParams {
@@ -44,4 +44,4 @@ class ColourFeature {
   std::vector<std::uint8_t> lut_;  // 2^18 entries: (b>>2)<<12 | (g>>2)<<6 | (r>>2)
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -13,7 +13,7 @@
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/region_growing.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct ContourLinesParams {
   int border_margin = 2;          ///< processing px: boundary points this close to the FOV edge are the entry
@@ -114,4 +114,4 @@ std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
                                               std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
                                               int min_points = 8);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -8,7 +8,7 @@
 #include "endo_guidance/core/apparent_contour.h"
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// Outcome of a cylinder pose computation. Anything but kOk comes with no pose.
 enum class CylinderPoseStatus {
@@ -99,4 +99,4 @@ std::optional<std::array<ImageLine, 2>> projectCylinder(Eigen::Matrix3d const& K
 std::optional<Eigen::Vector3d> backProjectOntoAxis(Eigen::Matrix3d const& K, PluckerLine const& axis,
                                                    Eigen::Vector2d const& px);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

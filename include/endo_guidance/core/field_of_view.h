@@ -4,7 +4,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct FieldOfViewParams {
   int dark_threshold = 24;   ///< max(B,G,R) at or below this is the black surround (0..255)
@@ -29,4 +29,4 @@ struct FieldOfView {
 /// of the largest lit region, so dark shafts crossing the border do not notch it.
 FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& params = {});
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -7,7 +7,7 @@
 
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 enum class InsertionPointStatus {
   kOk = 0,
@@ -59,4 +59,4 @@ struct RobustIntersectOptions {
 InsertionPointEstimate intersectAxesRobust(std::vector<PluckerLine> const& axes,
                                            RobustIntersectOptions const& options = {});
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -8,7 +8,7 @@
 #include "endo_guidance/core/apparent_contour.h"
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// Image of an insertion point: the common point of the imaged axes, [Doignon07] Eq. (5).
 struct ImagePointEstimate {
@@ -42,4 +42,4 @@ ImagePointEstimate intersectImageLinesRobust(std::vector<ImageLine> const& lines
                                              double scale_px = 1000.0, double inlier_fraction = 0.5,
                                              std::uint64_t seed = 1);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

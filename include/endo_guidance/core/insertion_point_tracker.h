@@ -8,7 +8,7 @@
 
 #include "endo_guidance/core/insertion_point.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 using AxisCovariance = Eigen::Matrix<double, 6, 6>;  ///< of (direction, moment), as CylinderPose
 
@@ -73,6 +73,8 @@ class InsertionPointTracker {
   void reset();
   void setFrozen(bool frozen) { frozen_ = frozen; }
   bool frozen() const { return frozen_; }
+  /// New thresholds (live tuning); the accumulated estimate is kept.
+  void setOptions(InsertionPointTrackerOptions const& options);
   std::size_t rejected() const { return rejected_; }
   InsertionPointTrackerOptions const& options() const { return options_; }
 
@@ -142,6 +144,9 @@ class InsertionPointSet {
   bool reset(int id);   ///< forget one point (it will be rediscovered); false if unknown
   void resetAll();
   bool setFrozen(int id, bool frozen);
+  /// New options (live tuning) for the set and every tracked point; estimates are kept.
+  void setOptions(InsertionPointSetOptions const& options);
+  InsertionPointSetOptions const& options() const { return options_; }
 
  private:
   void discover();
@@ -157,4 +162,4 @@ class InsertionPointSet {
   int next_id_ = 0;
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

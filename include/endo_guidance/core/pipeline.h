@@ -12,7 +12,7 @@
 #include "endo_guidance/core/segmentation.h"
 #include "endo_guidance/core/shaft_tracking.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct PipelineParams {
   double radius = 0.004;                ///< instrument shaft radius, metres
@@ -88,4 +88,4 @@ class Pipeline {
   ShaftTracker tracker_;
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

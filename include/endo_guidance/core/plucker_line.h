@@ -5,7 +5,7 @@
 #include <Eigen/Geometry>
 #include <optional>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// An oriented 3D line in Plücker coordinates (direction d, moment m), see [Doignon07] Sec. 2.
 /// \f[ \mathbf{m} = \mathbf{p} \times \mathbf{d}, \qquad \|\mathbf{d}\| = 1,\ \mathbf{d}\cdot\mathbf{m} = 0 \f]
@@ -77,4 +77,4 @@ inline Eigen::Matrix3d skew(Eigen::Vector3d const& v) {
   return s;
 }
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -8,7 +8,7 @@
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/seed_search.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct RegionGrowingParams {
   /// Growth thresholds tried for each seed, ascending: pixels with feature at or below join the
@@ -58,4 +58,4 @@ class RegionGrower {
   cv::Mat labels_;
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -7,7 +7,7 @@
 
 #include "endo_guidance/core/synthetic_scene.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct RenderOptions {
   bool black_shafts = false;     ///< black insulated shafts instead of grey metal
@@ -39,4 +39,4 @@ class SceneRenderer {
   cv::Mat fov_;     // CV_32F coverage of the field of view
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

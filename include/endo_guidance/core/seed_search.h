@@ -7,7 +7,7 @@
 
 #include "endo_guidance/core/field_of_view.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct SeedSearchParams {
   int threshold = 40;          ///< feature value at or below which the border is "shaft-like"
@@ -39,4 +39,4 @@ struct Seed {
 std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, SeedSearchParams const& params = {},
                             std::vector<Eigen::Vector3d> const& trocar_images = {});
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -12,7 +12,7 @@
 #include "endo_guidance/core/region_growing.h"
 #include "endo_guidance/core/seed_search.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// All knobs of the segmentation (config/pipeline.yaml mirrors these defaults).
 struct SegmentationParams {
@@ -83,4 +83,4 @@ class InstrumentSegmenter {
 void drawSegmentationOverlay(cv::Mat& bgr, SegmentationResult const& result,
                              std::vector<Eigen::Vector3d> const& trocar_images = {});
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -5,7 +5,7 @@
 
 #include "endo_guidance/core/apparent_contour.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 struct ShaftTrackingParams {
   double max_angle_deg = 12.0;    ///< between the imaged axes of one shaft in consecutive frames
@@ -29,4 +29,4 @@ class ShaftTracker {
   int next_id_ = 0;
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

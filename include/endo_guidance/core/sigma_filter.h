@@ -3,7 +3,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// Lee's sigma filter [Lee83] on an 8-bit image: each pixel becomes the mean of the pixels of its
 /// (2 radius + 1)^2 window whose value is within +-delta of its own,
@@ -14,4 +14,4 @@ namespace endo_guidance {
 /// src and dst must differ. Radius 1..3.
 void sigmaFilter(cv::Mat const& src, cv::Mat& dst, int radius = 2, int delta = 12);
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

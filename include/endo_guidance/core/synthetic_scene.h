@@ -11,7 +11,7 @@
 #include "endo_guidance/core/apparent_contour.h"
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance {
+namespace endo_guidance::core {
 
 /// One instrument of a synthetic surgery: a shaft of radius `radius` pivoting about a trocar
 /// outside the field of view; its tip follows a Lissajous path in front of the camera.
@@ -69,4 +69,4 @@ class SyntheticScene {
   std::mt19937_64 rng_;
 };
 
-}  // namespace endo_guidance
+}  // namespace endo_guidance::core

@@ -12,6 +12,7 @@
 #include "endo_guidance/core/pipeline.h"
 
 namespace endo_guidance::io {
+using core::PipelineParams;
 
 /// A pinhole camera as in sensor_msgs/CameraInfo.
 struct CameraModel {
@@ -33,5 +34,17 @@ CameraModel loadCameraYaml(std::string const& path);
 /// Overrides fields of `params` with the keys present in a pipeline YAML (see config/pipeline.yaml;
 /// unknown keys are an error, listed in the exception, so a typo is not silently ignored).
 void loadPipelineYaml(std::string const& path, PipelineParams& params);
+
+}  // namespace endo_guidance::io
+
+namespace YAML {
+class Node;
+}
+
+namespace endo_guidance::io {
+
+/// The same from a YAML tree (the nodes convert their parameter namespace to one): returns the
+/// unknown keys ("group/key") instead of throwing; throws std::runtime_error on a wrong type.
+std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& params);
 
 }  // namespace endo_guidance::io

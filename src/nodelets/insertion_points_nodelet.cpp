@@ -1,0 +1,241 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// endo_guidance/InsertionPoints: instrument axes -> insertion points (trocars), the attached
+// instruments, tf <optical frame> -> trocar_<id>, rviz markers; services to reset or freeze an
+// estimate. A thin adapter over core::InsertionPointSet.
+#include <dynamic_reconfigure/server.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <chrono>
+#include <map>
+#include <memory>
+#include <mutex>
+
+#include "endo_guidance/FreezeInsertionPoint.h"
+#include "endo_guidance/InsertionPointArray.h"
+#include "endo_guidance/InsertionPointsConfig.h"
+#include "endo_guidance/InstrumentAxisArray.h"
+#include "endo_guidance/ResetInsertionPoint.h"
+#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/ros/conversions.h"
+#include "endo_guidance/ros/frame_monitor.h"
+#include "endo_guidance/ros/markers.h"
+
+namespace endo_guidance {
+
+class InsertionPointsNodelet : public nodelet::Nodelet {
+ public:
+  void onInit() override;
+
+ private:
+  void infoCb(sensor_msgs::CameraInfoConstPtr const& info);
+  void axesCb(InstrumentAxisArray::ConstPtr const& msg);
+  void configCb(InsertionPointsConfig& c, uint32_t level);
+  bool resetSrv(ResetInsertionPoint::Request& req, ResetInsertionPoint::Response& res);
+  bool freezeSrv(FreezeInsertionPoint::Request& req, FreezeInsertionPoint::Response& res);
+  void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);
+
+  ros::NodeHandle nh_, pnh_;
+  ros::Subscriber axes_sub_, info_sub_;
+  ros::Publisher points_pub_, instruments_pub_, markers_pub_;
+  ros::ServiceServer reset_srv_, freeze_srv_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
+  std::unique_ptr<ros_io::FrameMonitor> monitor_;
+  std::unique_ptr<dynamic_reconfigure::Server<InsertionPointsConfig>> reconfigure_;
+  boost::recursive_mutex reconfigure_mutex_;
+
+  std::mutex mutex_;  // guards everything below
+  core::PipelineParams params_;
+  std::string frame_prefix_ = "trocar_";
+  bool publish_tf_ = true, reset_on_time_jump_ = true;
+  std::unique_ptr<core::InsertionPointSet> set_;
+  sensor_msgs::CameraInfoConstPtr info_;
+  std::string info_error_ = "no camera_info received yet";
+  ros::Time last_stamp_;
+  std::vector<core::InsertionPointReport> last_reports_;
+};
+
+void InsertionPointsNodelet::onInit() {
+  nh_ = getNodeHandle();
+  pnh_ = getPrivateNodeHandle();
+  pnh_.param<std::string>("frame_prefix", frame_prefix_, "trocar_");
+  pnh_.param("publish_tf", publish_tf_, true);
+  pnh_.param("reset_on_time_jump", reset_on_time_jump_, true);
+  try {
+    for (auto const& k : ros_io::loadPipelineParams(
+             pnh_, params_, {"frame_prefix", "publish_tf", "reset_on_time_jump", "expected_rate"}))
+      NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
+  } catch (std::exception const& e) {
+    NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
+    params_ = core::PipelineParams{};
+  }
+  double expected_rate = 0.0;
+  pnh_.param("expected_rate", expected_rate, 0.0);
+  monitor_ = std::make_unique<ros_io::FrameMonitor>(nh_, pnh_, "insertion_points", expected_rate);
+  monitor_->setExtra([this](diagnostic_updater::DiagnosticStatusWrapper& s) { diagnostics(s); });
+  tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+
+  reconfigure_ = std::make_unique<dynamic_reconfigure::Server<InsertionPointsConfig>>(reconfigure_mutex_, pnh_);
+  InsertionPointsConfig c;
+  c.reject_unattached = params_.reject_unattached;
+  c.attach_distance = params_.insertion_points.attach_distance;
+  c.min_conditioning = params_.insertion_points.tracker.min_conditioning;
+  c.point_motion_sigma = params_.insertion_points.tracker.point_motion_sigma;
+  c.gate_max = params_.insertion_points.tracker.gate_max;
+  reconfigure_->updateConfig(c);
+  reconfigure_->setCallback([this](InsertionPointsConfig& cfg, uint32_t level) { configCb(cfg, level); });
+
+  points_pub_ = nh_.advertise<InsertionPointArray>("insertion_points", 5);
+  instruments_pub_ = nh_.advertise<InstrumentAxisArray>("instruments", 5);
+  markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("trocar_markers", 2);
+  reset_srv_ = pnh_.advertiseService("reset", &InsertionPointsNodelet::resetSrv, this);
+  freeze_srv_ = pnh_.advertiseService("freeze", &InsertionPointsNodelet::freezeSrv, this);
+  info_sub_ = nh_.subscribe("camera_info", 2, &InsertionPointsNodelet::infoCb, this);
+  axes_sub_ = nh_.subscribe("axes", 10, &InsertionPointsNodelet::axesCb, this);
+}
+
+void InsertionPointsNodelet::configCb(InsertionPointsConfig& c, uint32_t) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  params_.reject_unattached = c.reject_unattached;
+  params_.insertion_points.attach_distance = c.attach_distance;
+  params_.insertion_points.tracker.min_conditioning = c.min_conditioning;
+  params_.insertion_points.tracker.point_motion_sigma = c.point_motion_sigma;
+  params_.insertion_points.tracker.gate_max = c.gate_max;
+  if (set_) set_->setOptions(params_.insertion_points);
+}
+
+void InsertionPointsNodelet::infoCb(sensor_msgs::CameraInfoConstPtr const& info) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  info_error_ = ros_io::validateCameraInfo(*info);
+  if (!info_error_.empty()) return;
+  bool const changed = !info_ || info_->width != info->width || info_->height != info->height || info_->K != info->K ||
+                       info_->P != info->P;
+  info_ = info;
+  if (changed) {  // a new camera: what counts as "outside the view" changed, start again
+    if (set_) NODELET_WARN("camera_info changed: insertion points reset");
+    set_ = std::make_unique<core::InsertionPointSet>(
+        core::outOfViewOptions(params_.insertion_points, ros_io::rectifiedK(*info), cv::Size(static_cast<int>(info->width), static_cast<int>(info->height))));
+  }
+}
+
+void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
+  monitor_->received();
+  auto const t0 = std::chrono::steady_clock::now();
+  std::unique_lock<std::mutex> lock(mutex_);
+  if (!set_) {
+    lock.unlock();
+    return monitor_->rejected(info_error_.empty() ? "no camera_info received yet" : info_error_);
+  }
+  if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
+    std::string const why = "time went backwards (" + std::to_string((last_stamp_ - msg->header.stamp).toSec()) + " s, bag loop?)";
+    if (reset_on_time_jump_) set_->resetAll();
+    lock.unlock();
+    monitor_->rejected(why + (reset_on_time_jump_ ? ": insertion points reset" : ""));
+    lock.lock();
+  }
+  last_stamp_ = msg->header.stamp;
+  Eigen::Matrix3d const K = ros_io::rectifiedK(*info_);
+  std::vector<Eigen::Vector3d> images;
+  core::wellConditionedImages(*set_, K, &images);
+  bool const established = !images.empty();
+  InstrumentAxisArray::Ptr instruments(new InstrumentAxisArray);
+  instruments->header = msg->header;
+  std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
+  for (auto const& a : msg->axes) {
+    auto const parsed = ros_io::fromMsg(a);
+    if (!parsed) {
+      monitor_->rejected("invalid Pluecker axis (non-unit direction, moment not orthogonal, or non-finite)");
+      continue;
+    }
+    core::CylinderPose const& pose = *parsed;
+    bool keep = true;
+    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep);
+    if (!keep) continue;
+    InstrumentAxis out = a;
+    out.insertion_point_id = id;
+    instruments->axes.push_back(out);
+    if (id >= 0)
+      attached[id].push_back(a.tip_valid ? Eigen::Vector3d(a.tip.x, a.tip.y, a.tip.z)
+                                         : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
+  }
+  last_reports_ = core::reportInsertionPoints(*set_, K);
+  InsertionPointArray::Ptr points(new InsertionPointArray);
+  points->header = msg->header;
+  std::vector<geometry_msgs::TransformStamped> tfs;
+  bool const markers = markers_pub_.getNumSubscribers() > 0;
+  visualization_msgs::MarkerArray::Ptr mk(new visualization_msgs::MarkerArray);
+  if (markers) mk->markers.push_back(ros_io::deleteAll(msg->header));
+  for (auto const& r : last_reports_) {
+    InsertionPoint p;
+    if (!ros_io::toMsg(r, p)) continue;
+    points->points.push_back(p);
+    if (markers) ros_io::appendTrocarMarkers(mk->markers, msg->header, r, attached[r.id]);
+    if (!r.well_conditioned) continue;  // an ill-conditioned point is not a frame: flagged, not guessed
+    geometry_msgs::TransformStamped t;
+    t.header = msg->header;  // the image's stamp and optical frame
+    t.child_frame_id = frame_prefix_ + std::to_string(r.id);
+    t.transform.translation.x = r.estimate.position.x();
+    t.transform.translation.y = r.estimate.position.y();
+    t.transform.translation.z = r.estimate.position.z();
+    t.transform.rotation.w = 1.0;  // axes parallel to the optical frame
+    tfs.push_back(t);
+  }
+  lock.unlock();
+  if (publish_tf_ && !tfs.empty()) tf_->sendTransform(tfs);
+  points_pub_.publish(points);
+  instruments_pub_.publish(instruments);
+  if (markers) markers_pub_.publish(mk);
+  monitor_->processed(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(), msg->header.stamp);
+}
+
+bool InsertionPointsNodelet::resetSrv(ResetInsertionPoint::Request& req, ResetInsertionPoint::Response& res) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!set_) {
+    res.message = "no camera_info yet: nothing to reset";
+    return true;
+  }
+  if (req.id < 0) {
+    set_->resetAll();
+    res.success = true;
+    res.message = "all insertion points reset";
+  } else {
+    res.success = set_->reset(req.id);
+    res.message = res.success ? "insertion point " + std::to_string(req.id) + " reset" : "no insertion point " + std::to_string(req.id);
+  }
+  NODELET_INFO_STREAM(res.message);
+  return true;
+}
+
+bool InsertionPointsNodelet::freezeSrv(FreezeInsertionPoint::Request& req, FreezeInsertionPoint::Response& res) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  res.success = set_ && set_->setFrozen(req.id, req.freeze);
+  res.message = res.success ? std::string(req.freeze ? "frozen " : "released ") + std::to_string(req.id)
+                            : "no insertion point " + std::to_string(req.id);
+  NODELET_INFO_STREAM(res.message);
+  return true;
+}
+
+void InsertionPointsNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  int well = 0;
+  for (auto const& r : last_reports_) {
+    well += r.well_conditioned;
+    char v[160];
+    std::snprintf(v, sizeof v, "views %zu, spread %.1f deg, rms %.1f mm, sigma %.1f mm%s", r.estimate.views,
+                  r.estimate.conditioning * 180.0 / M_PI, r.estimate.rms_distance * 1e3,
+                  std::sqrt(std::max(0.0, r.estimate.covariance.trace())) * 1e3, r.well_conditioned ? "" : " (ill-conditioned)");
+    stat.add(frame_prefix_ + std::to_string(r.id), v);
+  }
+  stat.add("insertion points", last_reports_.size());
+  stat.add("well conditioned", well);
+  if (stat.level == diagnostic_msgs::DiagnosticStatus::OK && !last_reports_.empty() && well == 0)
+    stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "no well-conditioned insertion point yet");
+}
+
+}  // namespace endo_guidance
+
+PLUGINLIB_EXPORT_CLASS(endo_guidance::InsertionPointsNodelet, nodelet::Nodelet)

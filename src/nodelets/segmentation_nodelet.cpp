@@ -1,0 +1,217 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// endo_guidance/Segmentation: image + camera_info -> apparent contours of the instrument shafts
+// (+ a debug overlay, drawn only when subscribed). A thin adapter over core::InstrumentSegmenter.
+#include <cv_bridge/cv_bridge.h>
+#include <dynamic_reconfigure/server.h>
+#include <image_transport/image_transport.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
+
+#include <chrono>
+#include <memory>
+#include <mutex>
+
+#include "endo_guidance/ApparentContourArray.h"
+#include "endo_guidance/InsertionPointArray.h"
+#include "endo_guidance/SegmentationConfig.h"
+#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/core/segmentation.h"
+#include "endo_guidance/core/shaft_tracking.h"
+#include "endo_guidance/ros/conversions.h"
+#include "endo_guidance/ros/frame_monitor.h"
+
+namespace endo_guidance {
+
+class SegmentationNodelet : public nodelet::Nodelet {
+ public:
+  void onInit() override;
+
+ private:
+  void connectCb();
+  void imageCb(sensor_msgs::ImageConstPtr const& image, sensor_msgs::CameraInfoConstPtr const& info);
+  void pointsCb(InsertionPointArray::ConstPtr const& msg);
+  void configCb(SegmentationConfig& config, uint32_t level);
+
+  ros::NodeHandle nh_, pnh_;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::CameraSubscriber camera_sub_;
+  image_transport::Publisher overlay_pub_;
+  ros::Publisher contours_pub_;
+  ros::Subscriber points_sub_;
+  std::unique_ptr<dynamic_reconfigure::Server<SegmentationConfig>> reconfigure_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<ros_io::FrameMonitor> monitor_;
+
+  std::mutex mutex_;  // guards everything below (image, points and reconfigure callbacks)
+  std::mutex connect_mutex_;
+  int queue_size_ = 2;
+  bool reset_on_time_jump_ = true;
+  core::PipelineParams params_;
+  core::InstrumentSegmenter segmenter_;
+  core::ShaftTracker tracker_;
+  std::vector<Eigen::Vector3d> trocar_images_;
+  std::vector<int> trocar_ids_;
+  ros::Time last_stamp_;
+  std::string camera_info_key_;  // distortion and K of the last camera_info (rebuild the rectifier on change)
+  std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectify_;
+};
+
+void SegmentationNodelet::onInit() {
+  nh_ = getNodeHandle();
+  pnh_ = getPrivateNodeHandle();
+  pnh_.param("queue_size", queue_size_, 2);
+  pnh_.param("reset_on_time_jump", reset_on_time_jump_, true);
+  try {
+    for (auto const& k : ros_io::loadPipelineParams(pnh_, params_, {"queue_size", "reset_on_time_jump", "image_transport", "expected_rate"}))
+      NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
+  } catch (std::exception const& e) {
+    NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
+    params_ = core::PipelineParams{};
+  }
+  segmenter_.setParams(params_.segmentation);
+  tracker_.setParams(params_.tracking);
+  double expected_rate = 0.0;
+  pnh_.param("expected_rate", expected_rate, 0.0);
+  monitor_ = std::make_unique<ros_io::FrameMonitor>(nh_, pnh_, "segmentation", expected_rate);
+
+  // Live tuning starts from the loaded values, not the .cfg defaults.
+  reconfigure_ = std::make_unique<dynamic_reconfigure::Server<SegmentationConfig>>(reconfigure_mutex_, pnh_);
+  SegmentationConfig c;
+  auto const& S = params_.segmentation;
+  c.sigma_delta = S.sigma_delta;
+  c.fov_dark_threshold = S.fov.dark_threshold;
+  c.seed_threshold = S.seeds.threshold;
+  c.seed_near_threshold = S.seeds.near_threshold;
+  c.seed_relative_threshold = S.seeds.relative_threshold;
+  c.max_angle_deg = S.contours.max_angle_deg;
+  c.min_length_px = S.contours.min_length_px;
+  c.max_residual_px = S.contours.max_residual_px;
+  c.min_edge_contrast = S.contours.min_edge_contrast;
+  c.min_fill = S.contours.min_fill;
+  c.min_elongation = S.contours.min_elongation;
+  c.max_regions = S.regions.max_regions;
+  reconfigure_->updateConfig(c);
+  reconfigure_->setCallback([this](SegmentationConfig& cfg, uint32_t level) { configCb(cfg, level); });
+
+  it_ = std::make_unique<image_transport::ImageTransport>(nh_);
+  points_sub_ = nh_.subscribe("insertion_points", 2, &SegmentationNodelet::pointsCb, this);
+  // Lazy: the camera is subscribed only while someone listens to an output.
+  std::lock_guard<std::mutex> lock(connect_mutex_);
+  auto const cb = [this](ros::SingleSubscriberPublisher const&) { connectCb(); };
+  auto const icb = [this](image_transport::SingleSubscriberPublisher const&) { connectCb(); };
+  contours_pub_ = nh_.advertise<ApparentContourArray>("contours", 5, cb, cb);
+  overlay_pub_ = it_->advertise("overlay", 1, icb, icb);
+}
+
+void SegmentationNodelet::connectCb() {
+  std::lock_guard<std::mutex> lock(connect_mutex_);
+  bool const wanted = contours_pub_.getNumSubscribers() > 0 || overlay_pub_.getNumSubscribers() > 0;
+  if (!wanted) {
+    camera_sub_.shutdown();
+  } else if (!camera_sub_) {
+    image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
+    camera_sub_ = it_->subscribeCamera("image", static_cast<uint32_t>(queue_size_), &SegmentationNodelet::imageCb, this, hints);
+  }
+}
+
+void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto& S = params_.segmentation;
+  S.sigma_delta = c.sigma_delta;
+  S.fov.dark_threshold = c.fov_dark_threshold;
+  S.seeds.threshold = c.seed_threshold;
+  S.seeds.near_threshold = c.seed_near_threshold;
+  S.seeds.relative_threshold = c.seed_relative_threshold;
+  S.contours.max_angle_deg = c.max_angle_deg;
+  S.contours.min_length_px = c.min_length_px;
+  S.contours.max_residual_px = c.max_residual_px;
+  S.contours.min_edge_contrast = c.min_edge_contrast;
+  S.contours.min_fill = c.min_fill;
+  S.contours.min_elongation = c.min_elongation;
+  S.regions.max_regions = c.max_regions;
+  segmenter_.setParams(S);
+}
+
+void SegmentationNodelet::pointsCb(InsertionPointArray::ConstPtr const& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  trocar_images_.clear();
+  trocar_ids_.clear();
+  for (auto const& p : msg->points) {
+    Eigen::Vector3d const x(p.image_point[0], p.image_point[1], p.image_point[2]);
+    if (!p.well_conditioned || !x.allFinite() || x.norm() == 0.0) continue;
+    trocar_images_.push_back(x);
+    trocar_ids_.push_back(p.id);
+  }
+}
+
+void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, sensor_msgs::CameraInfoConstPtr const& info) {
+  monitor_->received();
+  namespace enc = sensor_msgs::image_encodings;
+  if (image->encoding != enc::BGR8 && image->encoding != enc::RGB8 && image->encoding != enc::BGRA8 &&
+      image->encoding != enc::RGBA8)
+    return monitor_->rejected("image encoding '" + image->encoding + "' is not 8-bit colour (bgr8, rgb8, bgra8, rgba8)");
+  if (std::string const e = ros_io::validateCameraInfo(*info, static_cast<int>(image->width), static_cast<int>(image->height)); !e.empty())
+    return monitor_->rejected(e);
+  if (image->header.frame_id.empty()) return monitor_->rejected("image header has no frame_id (the optical frame)");
+  cv_bridge::CvImageConstPtr cv;
+  try {
+    cv = cv_bridge::toCvShare(image, enc::BGR8);
+  } catch (cv_bridge::Exception const& e) {
+    return monitor_->rejected(std::string("cv_bridge: ") + e.what());
+  }
+  auto const t0 = std::chrono::steady_clock::now();
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!last_stamp_.isZero() && image->header.stamp < last_stamp_) {
+    monitor_->rejected("time went backwards (" + std::to_string((last_stamp_ - image->header.stamp).toSec()) +
+                       " s, bag loop?): state reset");
+    if (reset_on_time_jump_) {
+      segmenter_.setParams(params_.segmentation);  // clears the per-seed memory
+      tracker_.reset();
+    }
+  }
+  last_stamp_ = image->header.stamp;
+  core::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
+  std::vector<core::ApparentContour> contours = seg.contours;
+  // Lens distortion: refit the lines to the rectified edge points.
+  if (ros_io::hasDistortion(*info)) {
+    std::string key = info->distortion_model;
+    for (double d : info->D) key += " " + std::to_string(d);
+    for (double k : info->K) key += " " + std::to_string(k);
+    for (double p : info->P) key += " " + std::to_string(p);
+    if (key != camera_info_key_) {
+      rectify_ = ros_io::rectifier(*info);
+      camera_info_key_ = key;
+    }
+    std::vector<core::ApparentContour> rectified;
+    for (std::size_t i = 0; i < contours.size(); ++i)
+      if (auto r = core::rectifyContour(contours[i], seg.edges[i], rectify_)) rectified.push_back(*r);
+    contours.swap(rectified);
+  }
+  tracker_.assign(contours);
+  ApparentContourArray::Ptr out(new ApparentContourArray);
+  out->header = image->header;
+  out->width = image->width;
+  out->height = image->height;
+  for (core::ApparentContour& c : contours) {
+    // The seed search attached the region to the image of a trocar (index into trocar_images_).
+    c.insertion_point_id = c.insertion_point_id >= 0 && c.insertion_point_id < static_cast<int>(trocar_ids_.size())
+                               ? trocar_ids_[static_cast<std::size_t>(c.insertion_point_id)]
+                               : -1;
+    endo_guidance::ApparentContour m;
+    if (ros_io::toMsg(c, m)) out->contours.push_back(m);
+  }
+  contours_pub_.publish(out);
+  monitor_->processed(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(),
+                      image->header.stamp);
+  if (overlay_pub_.getNumSubscribers() > 0) {
+    cv_bridge::CvImage ov(image->header, enc::BGR8, cv->image.clone());
+    core::drawSegmentationOverlay(ov.image, seg, trocar_images_);
+    overlay_pub_.publish(ov.toImageMsg());
+  }
+}
+
+}  // namespace endo_guidance
+
+PLUGINLIB_EXPORT_CLASS(endo_guidance::SegmentationNodelet, nodelet::Nodelet)

@@ -1,0 +1,192 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/ros/conversions.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+
+#include "endo_guidance/io/yaml_config.h"
+
+namespace endo_guidance::ros_io {
+
+namespace {
+template <class T>
+bool finite(T const& x) {
+  return std::all_of(std::begin(x), std::end(x), [](double v) { return std::isfinite(v); });
+}
+geometry_msgs::Point point(Eigen::Vector2d const& p) {
+  geometry_msgs::Point q;
+  q.x = p.x();
+  q.y = p.y();
+  return q;
+}
+}  // namespace
+
+std::string validateCameraInfo(sensor_msgs::CameraInfo const& info, int width, int height) {
+  if (info.width == 0 || info.height == 0) return "camera_info has a zero image size";
+  if (!finite(info.K) || !(info.K[0] > 0.0) || !(info.K[4] > 0.0))
+    return "camera_info has a zero or invalid camera matrix K (uncalibrated camera?)";
+  if (!finite(info.P) || (info.P[0] != 0.0 && !(info.P[5] > 0.0)) || info.P[0] < 0.0)
+    return "camera_info has an invalid projection matrix P";
+  if (!finite(info.D)) return "camera_info has non-finite distortion coefficients";
+  if (hasDistortion(info) && info.distortion_model != "plumb_bob" && info.distortion_model != "rational_polynomial")
+    return "camera_info distortion model '" + info.distortion_model + "' is not supported";
+  if (width > 0 && height > 0 && (static_cast<int>(info.width) != width || static_cast<int>(info.height) != height))
+    return "image size " + std::to_string(width) + "x" + std::to_string(height) + " differs from camera_info's " +
+           std::to_string(info.width) + "x" + std::to_string(info.height);
+  return {};
+}
+
+Eigen::Matrix3d rectifiedK(sensor_msgs::CameraInfo const& info) {
+  Eigen::Matrix3d K;
+  if (info.P[0] > 0.0 && info.P[5] > 0.0)
+    K << info.P[0], info.P[1], info.P[2], info.P[4], info.P[5], info.P[6], info.P[8], info.P[9], info.P[10];
+  else
+    K << info.K[0], info.K[1], info.K[2], info.K[3], info.K[4], info.K[5], info.K[6], info.K[7], info.K[8];
+  return K;
+}
+
+bool hasDistortion(sensor_msgs::CameraInfo const& info) {
+  return std::any_of(info.D.begin(), info.D.end(), [](double d) { return d != 0.0; });
+}
+
+std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::CameraInfo const& info) {
+  cv::Matx33d const K(info.K.data());
+  cv::Matx33d const R = std::all_of(info.R.begin(), info.R.end(), [](double r) { return r == 0.0; })
+                            ? cv::Matx33d::eye()
+                            : cv::Matx33d(info.R.data());
+  Eigen::Matrix3d const Kr = rectifiedK(info);
+  cv::Matx33d const P(Kr(0, 0), Kr(0, 1), Kr(0, 2), Kr(1, 0), Kr(1, 1), Kr(1, 2), 0, 0, 1);
+  cv::Mat const D(info.D, true);
+  return [K, R, P, D](Eigen::Vector2d const& p) {
+    std::vector<cv::Point2d> in{{p.x(), p.y()}}, out;
+    cv::undistortPoints(in, out, K, D, R, P, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-10));
+    return Eigen::Vector2d(out[0].x, out[0].y);
+  };
+}
+
+bool toMsg(core::ApparentContour const& c, endo_guidance::ApparentContour& m) {
+  for (int s = 0; s < 2; ++s) {
+    if (!c.lines[s].allFinite() || !c.line_covariances[s].allFinite() || !std::isfinite(c.line_residual_px[s])) return false;
+    m.lines[s].a = c.lines[s].x();
+    m.lines[s].b = c.lines[s].y();
+    m.lines[s].c = c.lines[s].z();
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(m.lines[s].covariance.data()) = c.line_covariances[s];
+    m.line_residual_px[s] = c.line_residual_px[s];
+  }
+  if (!c.entry_px.allFinite() || !c.tip_px.allFinite() || !std::isfinite(c.residual_px)) return false;
+  m.residual_px = c.residual_px;
+  m.entry_px = point(c.entry_px);
+  m.tip_px = point(c.tip_px);
+  m.insertion_point_id = c.insertion_point_id;
+  m.track_id = c.track_id;
+  return true;
+}
+
+core::ApparentContour fromMsg(endo_guidance::ApparentContour const& m) {
+  core::ApparentContour c;
+  for (int s = 0; s < 2; ++s) {
+    c.lines[s] = Eigen::Vector3d(m.lines[s].a, m.lines[s].b, m.lines[s].c);
+    c.line_covariances[s] = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor> const>(m.lines[s].covariance.data());
+    c.line_residual_px[s] = m.line_residual_px[s];
+  }
+  c.residual_px = m.residual_px;
+  c.entry_px = {m.entry_px.x, m.entry_px.y};
+  c.tip_px = {m.tip_px.x, m.tip_px.y};
+  c.insertion_point_id = m.insertion_point_id;
+  c.track_id = m.track_id;
+  return c;
+}
+
+bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
+           endo_guidance::InstrumentAxis& m) {
+  Eigen::Vector3d const& d = pose.axis.direction();
+  Eigen::Vector3d const& mo = pose.axis.moment();
+  if (!d.allFinite() || !mo.allFinite() || !pose.covariance.allFinite() || !std::isfinite(radius) || !std::isfinite(residual_px))
+    return false;
+  m.axis.direction.x = d.x();
+  m.axis.direction.y = d.y();
+  m.axis.direction.z = d.z();
+  m.axis.moment.x = mo.x();
+  m.axis.moment.y = mo.y();
+  m.axis.moment.z = mo.z();
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m.covariance.data()) = pose.covariance;
+  m.radius = radius;
+  m.residual_px = residual_px;
+  m.tip_valid = tip && tip->allFinite();
+  if (m.tip_valid) {
+    m.tip.x = tip->x();
+    m.tip.y = tip->y();
+    m.tip.z = tip->z();
+  }
+  return true;
+}
+
+std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) {
+  Eigen::Vector3d const d(m.axis.direction.x, m.axis.direction.y, m.axis.direction.z);
+  Eigen::Vector3d const mo(m.axis.moment.x, m.axis.moment.y, m.axis.moment.z);
+  if (!d.allFinite() || !mo.allFinite() || std::abs(d.norm() - 1.0) > 1e-6 || std::abs(d.dot(mo)) > 1e-6 * (1.0 + mo.norm()))
+    return std::nullopt;
+  auto const axis = core::PluckerLine::fromDirectionMoment(d, mo);
+  if (!axis) return std::nullopt;
+  core::CylinderPose p;
+  p.axis = *axis;
+  p.covariance = Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor> const>(m.covariance.data());
+  p.distance = p.axis.moment().norm();
+  if (!p.covariance.allFinite()) p.covariance.setZero();
+  return p;
+}
+
+bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m) {
+  auto const& e = r.estimate;
+  if (!e.position.allFinite() || !e.covariance.allFinite() || !r.image_point.allFinite() || !std::isfinite(e.rms_distance) ||
+      !std::isfinite(e.conditioning))
+    return false;
+  m.id = r.id;
+  m.position.x = e.position.x();
+  m.position.y = e.position.y();
+  m.position.z = e.position.z();
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(m.covariance.data()) = e.covariance;
+  for (int i = 0; i < 3; ++i) m.image_point[i] = r.image_point[i];
+  m.views = static_cast<std::uint32_t>(e.views);
+  m.rms_distance = e.rms_distance;
+  m.conditioning = e.conditioning;
+  m.well_conditioned = r.well_conditioned;
+  return true;
+}
+
+namespace {
+YAML::Node toYaml(XmlRpc::XmlRpcValue& v) {
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeBoolean: return YAML::Node(static_cast<bool>(v));
+    case XmlRpc::XmlRpcValue::TypeInt: return YAML::Node(static_cast<int>(v));
+    case XmlRpc::XmlRpcValue::TypeDouble: return YAML::Node(static_cast<double>(v));
+    case XmlRpc::XmlRpcValue::TypeString: return YAML::Node(static_cast<std::string>(v));
+    case XmlRpc::XmlRpcValue::TypeArray: {
+      YAML::Node n(YAML::NodeType::Sequence);
+      for (int i = 0; i < v.size(); ++i) n.push_back(toYaml(v[i]));
+      return n;
+    }
+    case XmlRpc::XmlRpcValue::TypeStruct: {
+      YAML::Node n(YAML::NodeType::Map);
+      for (auto& kv : v) n[kv.first] = toYaml(kv.second);
+      return n;
+    }
+    default: return YAML::Node();
+  }
+}
+}  // namespace
+
+std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, core::PipelineParams& params,
+                                            std::vector<std::string> const& own) {
+  XmlRpc::XmlRpcValue all;
+  if (!nh.getParam(nh.getNamespace(), all) || all.getType() != XmlRpc::XmlRpcValue::TypeStruct) return {};
+  YAML::Node root(YAML::NodeType::Map);
+  for (auto& kv : all)
+    if (std::find(own.begin(), own.end(), kv.first) == own.end()) root[kv.first] = toYaml(kv.second);
+  return io::applyPipelineParams(root, params);
+}
+
+}  // namespace endo_guidance::ros_io
