@@ -40,6 +40,8 @@ class SegmentationNodelet : public nodelet::Nodelet {
   image_transport::Publisher overlay_pub_;
   ros::Publisher contours_pub_;
   ros::Subscriber points_sub_;
+  ros::WallTimer watchdog_;
+  ros::WallTime last_frame_;
   std::unique_ptr<dynamic_reconfigure::Server<SegmentationConfig>> reconfigure_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<ros_io::FrameMonitor> monitor_;
@@ -103,6 +105,17 @@ void SegmentationNodelet::onInit() {
   auto const icb = [this](image_transport::SingleSubscriberPublisher const&) { connectCb(); };
   contours_pub_ = nh_.advertise<ApparentContourArray>("contours", 5, cb, cb);
   overlay_pub_ = it_->advertise("overlay", 1, icb, icb);
+  // image_transport pairs images and camera_info by stamp: without camera_info nothing arrives.
+  watchdog_ = nh_.createWallTimer(ros::WallDuration(1.0), [this](ros::WallTimerEvent const&) {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    if (!camera_sub_ || camera_sub_.getNumPublishers() == 0) {
+      last_frame_ = ros::WallTime::now();
+      return;
+    }
+    if ((ros::WallTime::now() - last_frame_).toSec() > 3.0)
+      monitor_->rejected("no image + camera_info pair for 3 s on '" + camera_sub_.getTopic() + "' and '" + camera_sub_.getInfoTopic() +
+                         "': is camera_info published, with the images' stamps?");
+  });
 }
 
 void SegmentationNodelet::connectCb() {
@@ -148,6 +161,10 @@ void SegmentationNodelet::pointsCb(InsertionPointArray::ConstPtr const& msg) {
 
 void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, sensor_msgs::CameraInfoConstPtr const& info) {
   monitor_->received();
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    last_frame_ = ros::WallTime::now();
+  }
   namespace enc = sensor_msgs::image_encodings;
   if (image->encoding != enc::BGR8 && image->encoding != enc::RGB8 && image->encoding != enc::BGRA8 &&
       image->encoding != enc::RGBA8)

@@ -10,7 +10,7 @@
 
 #include "endo_guidance/core/plucker_line.h"
 
-namespace endo_guidance::test {
+namespace endo_guidance::core::test {
 
 inline Eigen::Matrix3d defaultK() {
   return (Eigen::Matrix3d() << 500, 0, 319.5, 0, 500, 239.5, 0, 0, 1).finished();
@@ -53,4 +53,4 @@ inline double angleDeg(Eigen::Vector3d const& a, Eigen::Vector3d const& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
 }
 
-}  // namespace endo_guidance::test
+}  // namespace endo_guidance::core::test

@@ -1,0 +1,285 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// rostest: the three nodelets in one manager (test/ros/pipeline.test) fed with a rendered
+// synthetic surgery whose geometry is exactly known. Frames are published in lock step (the
+// next one after the previous one's insertion points came back), so no frame is dropped and the
+// result does not depend on the machine's speed.
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <mutex>
+
+#include "endo_guidance/ApparentContourArray.h"
+#include "endo_guidance/InsertionPointArray.h"
+#include "endo_guidance/InstrumentAxisArray.h"
+#include "endo_guidance/core/scene_renderer.h"
+#include "endo_guidance/core/synthetic_scene.h"
+
+using namespace endo_guidance;
+
+namespace {
+
+std::string const kFrame = "endoscope_optical_frame";
+
+template <class M>
+struct Latest {
+  std::mutex m;
+  typename M::ConstPtr msg;
+  int count = 0;
+  void cb(typename M::ConstPtr const& x) {
+    std::lock_guard<std::mutex> l(m);
+    msg = x;
+    ++count;
+  }
+  typename M::ConstPtr get() {
+    std::lock_guard<std::mutex> l(m);
+    return msg;
+  }
+};
+
+bool finite(std::initializer_list<double> v) {
+  for (double x : v)
+    if (!std::isfinite(x)) return false;
+  return true;
+}
+
+class Graph : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    image_pub_ = nh_.advertise<sensor_msgs::Image>("endoscope/image_raw", 5);
+    info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("endoscope/camera_info", 5);
+    subs_.push_back(nh_.subscribe("endoscope/contours", 50, &Latest<ApparentContourArray>::cb, &contours_));
+    subs_.push_back(nh_.subscribe("endoscope/axes", 50, &Latest<InstrumentAxisArray>::cb, &axes_));
+    subs_.push_back(nh_.subscribe("endoscope/insertion_points", 50, &Latest<InsertionPointArray>::cb, &points_));
+    subs_.push_back(nh_.subscribe("/diagnostics", 50, &Graph::diagCb, this));
+    subs_.push_back(nh_.subscribe("endoscope/instruments", 50, &Latest<InstrumentAxisArray>::cb, &instruments_));
+    for (int i = 0; i < 100 && (image_pub_.getNumSubscribers() == 0 || points_sub_ready() == false); ++i)
+      ros::WallDuration(0.05).sleep();
+    ASSERT_GT(image_pub_.getNumSubscribers(), 0u) << "the Segmentation nodelet did not subscribe to the camera";
+  }
+  bool points_sub_ready() { return subs_[2].getNumPublishers() > 0 && subs_[0].getNumPublishers() > 0; }
+  void diagCb(diagnostic_msgs::DiagnosticArray::ConstPtr const& d) {
+    std::lock_guard<std::mutex> l(diag_mutex_);
+    for (auto const& s : d->status) {
+      diag_text_ += s.name + ": " + s.message + ";";
+      for (auto const& kv : s.values) diag_text_ += " " + kv.key + "=" + kv.value;
+      diag_text_ += "\n";
+    }
+  }
+  /// Waits (wall time) until some diagnostics text contains `what`.
+  bool diagnosticsSay(std::string const& what, double timeout = 4.0) {
+    for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < timeout; ros::WallDuration(0.05).sleep()) {
+      std::lock_guard<std::mutex> l(diag_mutex_);
+      if (diag_text_.find(what) != std::string::npos) return true;
+    }
+    return false;
+  }
+  sensor_msgs::CameraInfo info(ros::Time const& t) const {
+    sensor_msgs::CameraInfo c;
+    c.header.stamp = t;
+    c.header.frame_id = kFrame;
+    c.width = 640;
+    c.height = 480;
+    c.distortion_model = "plumb_bob";
+    c.D.assign(5, 0.0);
+    for (int i = 0; i < 9; ++i) c.K[i] = so_.K(i / 3, i % 3);
+    c.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    for (int i = 0; i < 12; ++i) c.P[i] = (i % 4 == 3) ? 0.0 : so_.K(i / 4, i % 4);
+    return c;
+  }
+  /// Publishes one frame and waits until the insertion points of its stamp come back.
+  bool publish(cv::Mat const& bgr, ros::Time const& t, sensor_msgs::CameraInfo const* ci = nullptr, std::string const& enc = "bgr8") {
+    cv_bridge::CvImage img;
+    img.header.stamp = t;
+    img.header.frame_id = kFrame;
+    img.encoding = enc;
+    img.image = bgr;
+    info_pub_.publish(ci ? *ci : info(t));
+    image_pub_.publish(img.toImageMsg());
+    for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < 2.0; ros::WallDuration(0.001).sleep()) {
+      auto const p = points_.get();
+      auto const a = axes_.get();
+      auto const c = contours_.get();
+      auto const i = instruments_.get();
+      if (p && p->header.stamp == t && a && a->header.stamp == t && c && c->header.stamp == t && i && i->header.stamp == t)
+        return true;
+    }
+    return false;
+  }
+
+  ros::NodeHandle nh_;
+  core::SyntheticSceneOptions so_;
+  ros::Publisher image_pub_, info_pub_;
+  std::vector<ros::Subscriber> subs_;
+  Latest<ApparentContourArray> contours_;
+  Latest<InstrumentAxisArray> axes_;
+  Latest<InsertionPointArray> points_;
+  Latest<InstrumentAxisArray> instruments_;
+  std::mutex diag_mutex_;
+  std::string diag_text_;
+};
+
+using core::SceneRenderer;
+using core::SyntheticScene;
+using core::defaultInstruments;
+
+TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
+  SyntheticScene scene(defaultInstruments(), so_);
+  SceneRenderer renderer(so_.width, so_.height);
+  tf2_ros::Buffer buffer;
+  tf2_ros::TransformListener listener(buffer);
+  int const frames = 220;
+  int matched_contours = 0, all_contours = 0, truth_views = 0, axes_seen = 0;
+  double worst_axis_deg = 0.0;
+  for (int k = 0; k < frames; ++k) {
+    ros::Time const t(100.0 + k * 0.04);
+    auto const views = scene.frame(k);
+    ASSERT_TRUE(publish(renderer.render(views, k), t)) << "frame " << k << " got no insertion points back";
+    auto const c = contours_.get();
+    auto const a = axes_.get();
+    ASSERT_TRUE(c && c->header.stamp == t && c->header.frame_id == kFrame);
+    ASSERT_TRUE(a && a->header.stamp == t);
+    // Every reported contour is one of the true shafts (lines within 1.5 px at the ends).
+    for (auto const& m : c->contours) {
+      ASSERT_TRUE(finite({m.lines[0].a, m.lines[0].b, m.lines[0].c, m.lines[1].a, m.lines[1].b, m.lines[1].c, m.residual_px}));
+      bool ok = false;
+      for (auto const& v : views) {
+        double e = 0.0;
+        for (int s = 0; s < 2; ++s)
+          for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
+            Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
+            e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
+          }
+        ok |= e < 1.5;
+      }
+      matched_contours += ok;
+      ++all_contours;
+    }
+    truth_views += static_cast<int>(views.size());
+    // Every axis is finite; once the trocars are known, every reported instrument (attached to
+    // a trocar) is close to a true axis.
+    for (auto const& m : a->axes)
+      ASSERT_TRUE(finite({m.axis.direction.x, m.axis.direction.y, m.axis.direction.z, m.axis.moment.x, m.axis.moment.y, m.axis.moment.z}));
+    auto const inst = instruments_.get();
+    ASSERT_TRUE(inst && inst->header.stamp == t);
+    if (k < 120) continue;
+    for (auto const& m : inst->axes) {
+      ASSERT_TRUE(finite({m.axis.direction.x, m.axis.direction.y, m.axis.direction.z, m.axis.moment.x, m.axis.moment.y, m.axis.moment.z}));
+      for (double x : m.covariance) ASSERT_TRUE(std::isfinite(x));
+      Eigen::Vector3d const d(m.axis.direction.x, m.axis.direction.y, m.axis.direction.z);
+      double best = 180.0;
+      for (auto const& v : views) best = std::min(best, std::acos(std::min(1.0, d.dot(v.axis.direction()))) * 180.0 / M_PI);
+      worst_axis_deg = std::max(worst_axis_deg, best);
+      ++axes_seen;
+    }
+  }
+  std::printf("[ graph ] %d of %d contours on a true shaft (%d true views); %d late instruments, worst direction error %.2f deg\n",
+              matched_contours, all_contours, truth_views, axes_seen, worst_axis_deg);
+  EXPECT_GT(matched_contours, truth_views * 6 / 10);
+  EXPECT_GE(matched_contours, all_contours * 9 / 10);  // raw contours: few false ones (they are filtered below)
+  EXPECT_GT(axes_seen, 100);
+  EXPECT_LT(worst_axis_deg, 3.0);
+  auto const p = points_.get();
+  ASSERT_TRUE(p);
+  int well = 0;
+  for (auto const& q : p->points) {
+    ASSERT_TRUE(finite({q.position.x, q.position.y, q.position.z, q.image_point[0], q.image_point[1], q.image_point[2]}));
+    well += q.well_conditioned;
+  }
+  EXPECT_EQ(well, 3);
+  // tf: optical frame -> trocar_<id> at the last image stamp, each within 3 mm of a true trocar.
+  int found = 0;
+  for (auto const& q : p->points) {
+    if (!q.well_conditioned) continue;
+    geometry_msgs::TransformStamped tr;
+    ASSERT_NO_THROW(tr = buffer.lookupTransform(kFrame, "trocar_" + std::to_string(q.id), p->header.stamp, ros::Duration(1.0)));
+    Eigen::Vector3d const X(tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z);
+    double best = 1e9;
+    for (std::size_t i = 0; i < scene.size(); ++i) best = std::min(best, (X - scene.meanTrocar(static_cast<int>(i))).norm());
+    std::printf("[ graph ] tf %s -> trocar_%d: %.2f mm from the true trocar\n", kFrame.c_str(), q.id, best * 1e3);
+    EXPECT_LT(best, 0.003);
+    found += best < 0.003;
+  }
+  EXPECT_EQ(found, 3);
+}
+
+TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {
+  SyntheticScene scene(defaultInstruments(), so_);
+  SceneRenderer renderer(so_.width, so_.height);
+  cv::Mat const good = renderer.render(scene.frame(10), 10);
+  double t = 500.0;
+  auto next = [&t] { return ros::Time(t += 0.04); };
+  ASSERT_TRUE(publish(good, next()));
+  int const before = contours_.count;
+
+  // Wrong encoding: nothing published for it, a clear error on /diagnostics.
+  cv::Mat grey;
+  cv::cvtColor(good, grey, cv::COLOR_BGR2GRAY);
+  EXPECT_FALSE(publish(grey, next(), nullptr, "mono8"));
+  EXPECT_TRUE(diagnosticsSay("is not 8-bit colour"));
+  // Image size differs from camera_info.
+  cv::Mat small;
+  cv::resize(good, small, {320, 240});
+  EXPECT_FALSE(publish(small, next()));
+  EXPECT_TRUE(diagnosticsSay("differs from camera_info"));
+  // All-zero K (an uncalibrated camera).
+  ros::Time tz = next();
+  sensor_msgs::CameraInfo zero = info(tz);
+  zero.K.fill(0.0);
+  zero.P.fill(0.0);
+  EXPECT_FALSE(publish(good, tz, &zero));
+  EXPECT_TRUE(diagnosticsSay("zero or invalid camera matrix K"));
+  EXPECT_EQ(contours_.count, before) << "a bad frame produced output";
+  // Missing camera_info: images alone never pair.
+  for (int i = 0; i < 45; ++i) {
+    cv_bridge::CvImage img(std_msgs::Header(), "bgr8", good);
+    img.header.stamp = next();
+    img.header.frame_id = kFrame;
+    image_pub_.publish(img.toImageMsg());
+    ros::WallDuration(0.1).sleep();
+  }
+  EXPECT_TRUE(diagnosticsSay("is camera_info published"));
+  // Time going backwards (a bag loop): reported, state reset, frames still processed.
+  ASSERT_TRUE(publish(good, next()));
+  EXPECT_TRUE(publish(good, ros::Time(10.0)));
+  EXPECT_TRUE(diagnosticsSay("time went backwards"));
+  // A non-finite axis straight into InsertionPoints: rejected, never published.
+  ros::Publisher axes_pub = nh_.advertise<InstrumentAxisArray>("endoscope/axes", 2);
+  for (int i = 0; i < 40 && axes_pub.getNumSubscribers() == 0; ++i) ros::WallDuration(0.05).sleep();
+  InstrumentAxisArray bad;
+  bad.header.stamp = ros::Time(11.0);
+  bad.header.frame_id = kFrame;
+  bad.axes.resize(1);
+  bad.axes[0].axis.direction.x = std::nan("");
+  bad.axes[0].axis.direction.z = 1.0;
+  bool said = false;
+  for (int i = 0; i < 3 && !said; ++i) {
+    axes_pub.publish(bad);
+    said = diagnosticsSay("invalid Pluecker axis", 1.5);
+  }
+  EXPECT_TRUE(said);
+  // Still running: a good frame gives contours again.
+  int const c0 = contours_.count;
+  EXPECT_TRUE(publish(good, ros::Time(12.0)));
+  EXPECT_GT(contours_.count, c0);
+  auto const c = contours_.get();
+  ASSERT_TRUE(c);
+  EXPECT_GE(c->contours.size(), 1u);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_pipeline_graph");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  int const r = RUN_ALL_TESTS();
+  spinner.stop();
+  return r;
+}
