@@ -1,0 +1,61 @@
+#!/usr/bin/python3
+"""Listens to the running pipeline (<camera>/insertion_points, <camera>/overlay) until the input
+stops, then prints every trocar estimate with its error against a truth YAML and saves the last
+overlay image as PNG.  Usage: report_trocars.py TRUTH.yaml OUT.png [camera]"""
+import sys
+import time
+
+import numpy as np
+import rospy
+import yaml
+from sensor_msgs.msg import Image
+
+from endo_guidance.msg import InsertionPointArray
+
+
+def main():
+    truth_path, png = sys.argv[1], sys.argv[2]
+    cam = sys.argv[3] if len(sys.argv) > 3 else "endoscope"
+    truth = np.array(yaml.safe_load(open(truth_path))["trocars"], float)
+    rospy.init_node("report_trocars", anonymous=True)
+    state = {"points": None, "overlay": None, "last": None, "frames": 0}
+
+    def on_points(msg):
+        state["points"], state["last"] = msg, time.time()
+        state["frames"] += 1
+
+    def on_overlay(msg):
+        if msg.encoding == "bgr8":
+            state["overlay"] = np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.step)[:, : msg.width * 3].reshape(
+                msg.height, msg.width, 3)
+
+    rospy.Subscriber(cam + "/insertion_points", InsertionPointArray, on_points, queue_size=10)
+    rospy.Subscriber(cam + "/overlay", Image, on_overlay, queue_size=1)
+    start = time.time()
+    while not rospy.is_shutdown():
+        time.sleep(0.2)
+        if state["last"] is None and time.time() - start > 60:
+            sys.exit("no insertion points received in 60 s")
+        if state["last"] is not None and time.time() - state["last"] > 3.0:
+            break
+    p = state["points"]
+    print(f"{state['frames']} frames processed; insertion points at the last frame (optical frame, mm):")
+    worst = 0.0
+    for q in p.points:
+        x = np.array([q.position.x, q.position.y, q.position.z])
+        err = np.linalg.norm(truth - x, axis=1)
+        i = int(np.argmin(err))
+        worst = max(worst, err[i]) if q.well_conditioned else worst
+        print(f"  trocar_{q.id}: ({x[0]*1e3:7.1f} {x[1]*1e3:7.1f} {x[2]*1e3:7.1f})  views {q.views:4d}  "
+              f"spread {np.degrees(q.conditioning):5.1f} deg  {'well conditioned' if q.well_conditioned else 'ILL-CONDITIONED'}"
+              f"  error vs true trocar {i}: {err[i]*1e3:.2f} mm")
+    found = sum(1 for q in p.points if q.well_conditioned)
+    print(f"{found} of {len(truth)} true trocars estimated; worst error {worst*1e3:.2f} mm")
+    if state["overlay"] is not None:
+        import cv2
+        cv2.imwrite(png, state["overlay"])
+        print(f"last overlay image: {png}")
+
+
+if __name__ == "__main__":
+    main()
