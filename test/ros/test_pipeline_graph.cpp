@@ -5,18 +5,25 @@
 // result does not depend on the machine's speed.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/Reconfigure.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sensor_msgs/CompressedImage.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <mutex>
 
 #include "endo_guidance/ApparentContourArray.h"
 #include "endo_guidance/InsertionPointArray.h"
+#include "endo_guidance/FreezeInsertionPoint.h"
 #include "endo_guidance/InstrumentAxisArray.h"
+#include "endo_guidance/ResetInsertionPoint.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/synthetic_scene.h"
 
@@ -51,16 +58,20 @@ bool finite(std::initializer_list<double> v) {
 class Graph : public ::testing::Test {
  protected:
   void SetUp() override {
+    ros::NodeHandle("~").param("compressed", compressed_, false);
     image_pub_ = nh_.advertise<sensor_msgs::Image>("endoscope/image_raw", 5);
+    compressed_pub_ = nh_.advertise<sensor_msgs::CompressedImage>("endoscope/image_raw/compressed", 5);
     info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("endoscope/camera_info", 5);
     subs_.push_back(nh_.subscribe("endoscope/contours", 50, &Latest<ApparentContourArray>::cb, &contours_));
     subs_.push_back(nh_.subscribe("endoscope/axes", 50, &Latest<InstrumentAxisArray>::cb, &axes_));
     subs_.push_back(nh_.subscribe("endoscope/insertion_points", 50, &Latest<InsertionPointArray>::cb, &points_));
     subs_.push_back(nh_.subscribe("/diagnostics", 50, &Graph::diagCb, this));
     subs_.push_back(nh_.subscribe("endoscope/instruments", 50, &Latest<InstrumentAxisArray>::cb, &instruments_));
-    for (int i = 0; i < 100 && (image_pub_.getNumSubscribers() == 0 || points_sub_ready() == false); ++i)
+    for (int i = 0; i < 100 && ((!compressed_ && image_pub_.getNumSubscribers() == 0) || points_sub_ready() == false); ++i)
       ros::WallDuration(0.05).sleep();
-    ASSERT_GT(image_pub_.getNumSubscribers(), 0u) << "the Segmentation nodelet did not subscribe to the camera";
+    for (int i = 0; i < 100 && compressed_ && compressed_pub_.getNumSubscribers() == 0; ++i) ros::WallDuration(0.05).sleep();
+    ASSERT_GT(compressed_ ? compressed_pub_.getNumSubscribers() : image_pub_.getNumSubscribers(), 0u)
+        << "the Segmentation nodelet did not subscribe to the camera";
   }
   bool points_sub_ready() { return subs_[2].getNumPublishers() > 0 && subs_[0].getNumPublishers() > 0; }
   void diagCb(diagnostic_msgs::DiagnosticArray::ConstPtr const& d) {
@@ -100,7 +111,15 @@ class Graph : public ::testing::Test {
     img.encoding = enc;
     img.image = bgr;
     info_pub_.publish(ci ? *ci : info(t));
-    image_pub_.publish(img.toImageMsg());
+    if (compressed_) {  // as compressed_image_transport publishes it
+      sensor_msgs::CompressedImage c;
+      c.header = img.header;
+      c.format = "bgr8; jpeg compressed bgr8";
+      cv::imencode(".jpg", bgr, c.data, {cv::IMWRITE_JPEG_QUALITY, 95});
+      compressed_pub_.publish(c);
+    } else {
+      image_pub_.publish(img.toImageMsg());
+    }
     for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < 2.0; ros::WallDuration(0.001).sleep()) {
       auto const p = points_.get();
       auto const a = axes_.get();
@@ -114,7 +133,8 @@ class Graph : public ::testing::Test {
 
   ros::NodeHandle nh_;
   core::SyntheticSceneOptions so_;
-  ros::Publisher image_pub_, info_pub_;
+  ros::Publisher image_pub_, info_pub_, compressed_pub_;
+  bool compressed_ = false;
   std::vector<ros::Subscriber> subs_;
   Latest<ApparentContourArray> contours_;
   Latest<InstrumentAxisArray> axes_;
@@ -136,6 +156,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   int const frames = 220;
   int matched_contours = 0, all_contours = 0, truth_views = 0, axes_seen = 0;
   double worst_axis_deg = 0.0;
+  std::vector<double> axis_errors;
   for (int k = 0; k < frames; ++k) {
     ros::Time const t(100.0 + k * 0.04);
     auto const views = scene.frame(k);
@@ -175,6 +196,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
       double best = 180.0;
       for (auto const& v : views) best = std::min(best, std::acos(std::min(1.0, d.dot(v.axis.direction()))) * 180.0 / M_PI);
       worst_axis_deg = std::max(worst_axis_deg, best);
+      axis_errors.push_back(best);
       ++axes_seen;
     }
   }
@@ -183,7 +205,12 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   EXPECT_GT(matched_contours, truth_views * 6 / 10);
   EXPECT_GE(matched_contours, all_contours * 9 / 10);  // raw contours: few false ones (they are filtered below)
   EXPECT_GT(axes_seen, 100);
-  EXPECT_LT(worst_axis_deg, 3.0);
+  std::sort(axis_errors.begin(), axis_errors.end());
+  ASSERT_FALSE(axis_errors.empty());
+  double const p95 = axis_errors[axis_errors.size() * 95 / 100];
+  std::printf("[ graph ] instrument direction error p95 %.2f deg\n", p95);
+  EXPECT_LT(p95, compressed_ ? 5.0 : 2.0);
+  EXPECT_LT(worst_axis_deg, compressed_ ? 10.0 : 3.0);  // JPEG (q95) blurs a short shaft's edges
   auto const p = points_.get();
   ASSERT_TRUE(p);
   int well = 0;
@@ -272,6 +299,109 @@ TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {
   EXPECT_GE(c->contours.size(), 1u);
 }
 
+
+// Runtime tuning: a seed threshold of 0 finds no shaft; restored, the shafts come back.
+TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
+  SyntheticScene scene(defaultInstruments(), so_);
+  SceneRenderer renderer(so_.width, so_.height);
+  cv::Mat const good = renderer.render(scene.frame(30), 30);
+  auto set = [](int threshold) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::IntParameter p;
+    p.name = "seed_threshold";
+    p.value = threshold;
+    srv.request.config.ints.push_back(p);
+    return ros::service::call("endoscope/segmentation/set_parameters", srv) && srv.response.config.ints.size() > 0;
+  };
+  ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
+  ASSERT_TRUE(publish(good, ros::Time(2000.0)));
+  ASSERT_GE(contours_.get()->contours.size(), 1u);
+  ASSERT_TRUE(set(0));
+  ASSERT_TRUE(publish(good, ros::Time(2000.04)));
+  EXPECT_EQ(contours_.get()->contours.size(), 0u);
+  ASSERT_TRUE(set(40));
+  ASSERT_TRUE(publish(good, ros::Time(2000.08)));
+  EXPECT_GE(contours_.get()->contours.size(), 1u);
+}
+
+// Services: freeze keeps a trocar where it is; reset forgets them.
+TEST_F(Graph, ResetAndFreezeServices) {
+  SyntheticScene scene(defaultInstruments(), so_);
+  SceneRenderer renderer(so_.width, so_.height);
+  double t = 3000.0;
+  for (int k = 0; k < 150; ++k) ASSERT_TRUE(publish(renderer.render(scene.frame(k), k), ros::Time(t += 0.04)));
+  auto p = points_.get();
+  ASSERT_GE(p->points.size(), 1u);
+  int const id = p->points.front().id;
+  FreezeInsertionPoint fz;
+  fz.request.id = id;
+  fz.request.freeze = true;
+  ASSERT_TRUE(ros::service::call("endoscope/insertion_points/freeze", fz));
+  EXPECT_TRUE(fz.response.success) << fz.response.message;
+  geometry_msgs::Point const frozen = p->points.front().position;
+  for (int k = 150; k < 200; ++k) ASSERT_TRUE(publish(renderer.render(scene.frame(k), k), ros::Time(t += 0.04)));
+  for (auto const& q : points_.get()->points)
+    if (q.id == id) EXPECT_TRUE(q.position.x == frozen.x && q.position.y == frozen.y && q.position.z == frozen.z);
+  fz.request.id = 9999;
+  ASSERT_TRUE(ros::service::call("endoscope/insertion_points/freeze", fz));
+  EXPECT_FALSE(fz.response.success);
+  ResetInsertionPoint rs;
+  rs.request.id = -1;
+  ASSERT_TRUE(ros::service::call("endoscope/insertion_points/reset", rs));
+  EXPECT_TRUE(rs.response.success);
+  ASSERT_TRUE(publish(renderer.render(scene.frame(200), 200), ros::Time(t += 0.04)));
+  EXPECT_EQ(points_.get()->points.size(), 0u);
+}
+
+// A distorted lens: the camera_info carries plumb_bob coefficients, the images are distorted;
+// the contours must be the straight lines of the rectified camera (the edge points are
+// undistorted, not the image).
+TEST_F(Graph, DistortedImagesGiveRectifiedContours) {
+  SyntheticScene scene(defaultInstruments(), so_);
+  SceneRenderer renderer(so_.width, so_.height);
+  cv::Matx33d const K(so_.K(0, 0), 0, so_.K(0, 2), 0, so_.K(1, 1), so_.K(1, 2), 0, 0, 1);
+  std::vector<double> const D{-0.2, 0.05, 0.0, 0.0, 0.0};
+  // For each distorted pixel, where it comes from in the ideal (rectified) image.
+  std::vector<cv::Point2f> grid, ideal;
+  for (int v = 0; v < so_.height; ++v)
+    for (int u = 0; u < so_.width; ++u) grid.emplace_back(static_cast<float>(u), static_cast<float>(v));
+  cv::undistortPoints(grid, ideal, K, D, cv::noArray(), K, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 1e-6));
+  cv::Mat map(so_.height, so_.width, CV_32FC2, ideal.data());
+  double t = 4000.0;
+  int checked = 0, within = 0, false_lines = 0;
+  double worst_truth = 0.0;
+  for (int k = 0; k < 60; ++k) {
+    auto const views = scene.frame(k);
+    cv::Mat distorted;
+    cv::remap(renderer.render(views, k), distorted, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0, 0, 0));
+    ros::Time const st(t += 0.04);
+    sensor_msgs::CameraInfo ci = info(st);
+    ci.D = D;
+    ASSERT_TRUE(publish(distorted, st, &ci));
+    for (auto const& m : contours_.get()->contours) {
+      double best = 1e9;
+      for (auto const& v : views) {
+        double e = 0.0;
+        for (int s = 0; s < 2; ++s)
+          for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
+            Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
+            e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
+          }
+        best = std::min(best, e);
+      }
+      ++checked;
+      if (best < 1.5) {
+        ++within;
+        worst_truth = std::max(worst_truth, best);
+      } else {
+        ++false_lines;
+      }
+    }
+  }
+  std::printf("[ distorted ] %d contours, %d within 1.5 px of the rectified truth (worst %.2f px)\n", checked, within, worst_truth);
+  EXPECT_GT(checked, 60);
+  EXPECT_GE(within, checked * 9 / 10);
+}
 }  // namespace
 
 int main(int argc, char** argv) {
