@@ -7,6 +7,6 @@ set +u; source build/devel/setup.bash; set -u
 export ROS_MASTER_URI="http://localhost:$((17000 + RANDOM % 3000))"
 roscore -p "${ROS_MASTER_URI##*:}" >/dev/null 2>&1 &
 core=$!
-trap 'kill -INT $core; wait $core 2>/dev/null || true' EXIT
+trap '{ kill -INT $core; wait $core; } 2>/dev/null || true' EXIT
 sleep 2
 build/devel/lib/endo_guidance/endo_guidance_latency "$@"

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Listens to the running pipeline (<camera>/insertion_points, <camera>/overlay) until the input
 stops, then prints every trocar estimate with its error against a truth YAML and saves the last
-overlay image as PNG.  Usage: report_trocars.py TRUTH.yaml OUT.png [camera]"""
+overlay image as PNG.  Usage: report_trocars.py TRUTH.yaml OUT.png [camera] [--check TOL_MM]
+With --check, exits 1 unless every true trocar has a well-conditioned estimate within TOL_MM."""
 import sys
 import time
 
@@ -14,8 +15,14 @@ from endo_guidance.msg import InsertionPointArray
 
 
 def main():
-    truth_path, png = sys.argv[1], sys.argv[2]
-    cam = sys.argv[3] if len(sys.argv) > 3 else "endoscope"
+    args = sys.argv[1:]
+    check = None
+    if "--check" in args:
+        i = args.index("--check")
+        check = float(args[i + 1])
+        del args[i:i + 2]
+    truth_path, png = args[0], args[1]
+    cam = args[2] if len(args) > 2 else "endoscope"
     truth = np.array(yaml.safe_load(open(truth_path))["trocars"], float)
     rospy.init_node("report_trocars", anonymous=True)
     state = {"points": None, "overlay": None, "last": None, "frames": 0}
@@ -49,12 +56,16 @@ def main():
         print(f"  trocar_{q.id}: ({x[0]*1e3:7.1f} {x[1]*1e3:7.1f} {x[2]*1e3:7.1f})  views {q.views:4d}  "
               f"spread {np.degrees(q.conditioning):5.1f} deg  {'well conditioned' if q.well_conditioned else 'ILL-CONDITIONED'}"
               f"  error vs true trocar {i}: {err[i]*1e3:.2f} mm")
-    found = sum(1 for q in p.points if q.well_conditioned)
-    print(f"{found} of {len(truth)} true trocars estimated; worst error {worst*1e3:.2f} mm")
+    est = [np.array([q.position.x, q.position.y, q.position.z]) for q in p.points if q.well_conditioned]
+    per_truth = [min((np.linalg.norm(t - e) for e in est), default=np.inf) for t in truth]
+    found = sum(1 for e in per_truth if e < 0.005)
+    print(f"{found} of {len(truth)} true trocars estimated (within 5 mm); worst error {worst*1e3:.2f} mm")
     if state["overlay"] is not None:
         import cv2
         cv2.imwrite(png, state["overlay"])
         print(f"last overlay image: {png}")
+    if check is not None and max(per_truth) * 1e3 > check:
+        sys.exit(f"CHECK FAILED: a true trocar has no estimate within {check} mm ({max(per_truth)*1e3:.2f} mm)")
 
 
 if __name__ == "__main__":

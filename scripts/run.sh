@@ -8,18 +8,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-BIN=build/devel/lib/endo_guidance
-DEMO="$PWD/build/demo"
-mkdir -p "$DEMO"
-[ -f "$DEMO/surgery.bag" ] || "$BIN/endo_guidance_synthetic" --write-bag "$DEMO/surgery.bag" --frames 250
-set +u; source build/devel/setup.bash; set -u
-export ROS_MASTER_URI="http://localhost:$((11400 + RANDOM % 500))"
-export ROS_HOME="${ROS_HOME:-$PWD/build/ros_home}"
-mkdir -p "$ROS_HOME"
-roslaunch -p "${ROS_MASTER_URI##*:}" endo_guidance replay.launch bag:="$DEMO/surgery.bag" quit_at_end:=true "$@" \
-  >"$ROS_HOME/run.log" 2>&1 &
-launch=$!
-trap 'kill -INT $launch 2>/dev/null; wait $launch 2>/dev/null || true' EXIT
-sleep 2
-/usr/bin/python3 scripts/report_trocars.py "$DEMO/surgery.truth.yaml" "$DEMO/overlay.png" /endoscope
-echo "pipeline log: $ROS_HOME/run.log"
+exec bash scripts/replay_demo.sh "$@"

@@ -60,6 +60,8 @@ void writeTruth(std::ostream& truth, SyntheticScene const& scene) {
 // A simulated surgery as a camera driver would record it (replay.launch's input).
 void writeBag(std::string const& path, SyntheticScene& scene, SyntheticSceneOptions const& so, RenderOptions const& ro,
               int frames) {
+  auto const parent = std::filesystem::path(path).parent_path();
+  if (!parent.empty()) std::filesystem::create_directories(parent);
   rosbag::Bag bag(path, rosbag::bagmode::Write);
   bag.setCompression(rosbag::compression::LZ4);
   SceneRenderer renderer(so.width, so.height, ro);
