@@ -55,6 +55,22 @@ bool finite(std::initializer_list<double> v) {
   return true;
 }
 
+/// Distance (px) of a reported contour to the nearest true shaft: the largest distance of its
+/// lines to the ends of the true lines (at the true entry and tip).
+double nearestTruthPx(endo_guidance::ApparentContour const& m, std::vector<core::SyntheticView> const& views) {
+  double best = 1e9;
+  for (auto const& v : views) {
+    double e = 0.0;
+    for (int s = 0; s < 2; ++s)
+      for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
+        Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
+        e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
+      }
+    best = std::min(best, e);
+  }
+  return best;
+}
+
 class Graph : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -168,16 +184,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
     // Every reported contour is one of the true shafts (lines within 1.5 px at the ends).
     for (auto const& m : c->contours) {
       ASSERT_TRUE(finite({m.lines[0].a, m.lines[0].b, m.lines[0].c, m.lines[1].a, m.lines[1].b, m.lines[1].c, m.residual_px}));
-      bool ok = false;
-      for (auto const& v : views) {
-        double e = 0.0;
-        for (int s = 0; s < 2; ++s)
-          for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
-            Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
-            e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
-          }
-        ok |= e < 1.5;
-      }
+      bool const ok = nearestTruthPx(m, views) < 1.5;
       matched_contours += ok;
       ++all_contours;
     }
@@ -379,16 +386,7 @@ TEST_F(Graph, DistortedImagesGiveRectifiedContours) {
     ci.D = D;
     ASSERT_TRUE(publish(distorted, st, &ci));
     for (auto const& m : contours_.get()->contours) {
-      double best = 1e9;
-      for (auto const& v : views) {
-        double e = 0.0;
-        for (int s = 0; s < 2; ++s)
-          for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
-            Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
-            e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
-          }
-        best = std::min(best, e);
-      }
+      double const best = nearestTruthPx(m, views);
       ++checked;
       if (best < 1.5) {
         ++within;
