@@ -25,6 +25,39 @@ Eigen::Vector3d SyntheticScene::trocarAt(int i, int k) const {
   return instruments_[i].trocar_c + b * options_.breathing_direction;
 }
 
+std::optional<SyntheticView> viewOfInstrument(Eigen::Matrix3d const& K, int width, int height, Eigen::Vector3d const& trocar_c,
+                                              Eigen::Vector3d const& tip_c, double radius, int instrument) {
+  SyntheticView v;
+  v.instrument = instrument;
+  v.radius = radius;
+  v.trocar_c = trocar_c;
+  v.tip_c = tip_c;
+  auto axis = PluckerLine::through(trocar_c, tip_c);
+  if (!axis) return std::nullopt;
+  v.axis = *axis;
+  auto const lines = projectCylinder(K, v.axis, radius);
+  if (!lines) return std::nullopt;
+  // Tip pixel; entry: where the imaged axis leaves the image on the trocar side.
+  Eigen::Vector3d const tp = K * tip_c;
+  if (tp.z() <= 0.0) return std::nullopt;
+  Eigen::Vector2d const tip_px = tp.head<2>() / tp.z();
+  if (tip_px.x() < 5 || tip_px.y() < 5 || tip_px.x() > width - 6 || tip_px.y() > height - 6) return std::nullopt;
+  auto const axis_img = v.axis.project(K);
+  if (!axis_img) return std::nullopt;
+  auto const seg = clipLineToImage(*axis_img, width, height);
+  if (!seg) return std::nullopt;
+  // Image direction entry -> tip: the projection of d at the tip.
+  Eigen::Vector3d const tp2 = K * (tip_c + 1e-3 * v.axis.direction());
+  Eigen::Vector2d const dir = (tp2.head<2>() / tp2.z() - tip_px).normalized();
+  Eigen::Vector2d entry = ((*seg)[0] - tip_px).dot(dir) < ((*seg)[1] - tip_px).dot(dir) ? (*seg)[0] : (*seg)[1];
+  if ((entry - tip_px).dot(dir) > 0.0 || (entry - tip_px).norm() < 40.0) return std::nullopt;  // tip must be past the entry
+  v.truth.lines = *lines;
+  v.truth.entry_px = entry;
+  v.truth.tip_px = tip_px;
+  v.measured = v.truth;
+  return v;
+}
+
 std::vector<SyntheticView> SyntheticScene::frame(int k) {
   std::vector<SyntheticView> out;
   double const t = k / options_.fps;
@@ -32,45 +65,19 @@ std::vector<SyntheticView> SyntheticScene::frame(int k) {
   Eigen::Matrix3d const& K = options_.K;
   for (int i = 0; i < static_cast<int>(instruments_.size()); ++i) {
     SyntheticInstrument const& ins = instruments_[i];
-    SyntheticView v;
-    v.instrument = i;
-    v.radius = ins.radius;
-    v.trocar_c = trocarAt(i, k);
     Eigen::Vector3d tip = ins.tip_centre_c;
     for (int a = 0; a < 3; ++a) tip(a) += ins.tip_amplitude(a) * std::sin(2.0 * M_PI * ins.tip_frequency(a) * t + a);
-    v.tip_c = tip;
-    auto axis = PluckerLine::through(v.trocar_c, tip);
-    if (!axis) continue;
-    v.axis = *axis;
-    auto const lines = projectCylinder(K, v.axis, ins.radius);
-    if (!lines) continue;
-    // Tip pixel; entry: where the imaged axis leaves the image on the trocar side.
-    Eigen::Vector3d const tp = K * tip;
-    if (tp.z() <= 0.0) continue;
-    Eigen::Vector2d const tip_px = tp.head<2>() / tp.z();
-    if (tip_px.x() < 5 || tip_px.y() < 5 || tip_px.x() > options_.width - 6 || tip_px.y() > options_.height - 6)
-      continue;
-    auto const axis_img = v.axis.project(K);
-    if (!axis_img) continue;
-    auto const seg = clipLineToImage(*axis_img, options_.width, options_.height);
-    if (!seg) continue;
-    // Image direction entry -> tip: the projection of d at the tip.
-    Eigen::Vector3d const tp2 = K * (tip + 1e-3 * v.axis.direction());
-    Eigen::Vector2d const dir = (tp2.head<2>() / tp2.z() - tip_px).normalized();
-    Eigen::Vector2d entry = ((*seg)[0] - tip_px).dot(dir) < ((*seg)[1] - tip_px).dot(dir) ? (*seg)[0] : (*seg)[1];
-    if ((entry - tip_px).dot(dir) > 0.0 || (entry - tip_px).norm() < 40.0) continue;  // tip must be past the entry
-    v.truth.lines = *lines;
-    v.truth.entry_px = entry;
-    v.truth.tip_px = tip_px;
-    v.measured = v.truth;
+    auto view = viewOfInstrument(K, options_.width, options_.height, trocarAt(i, k), tip, ins.radius, i);
+    if (!view) continue;
+    SyntheticView& v = *view;
     // Measured lines: each contour between the perpendicular feet of entry and tip, endpoints
     // displaced along the normal by N(0, sigma), refitted; orientation kept.
     double rs = 0.0;
     for (int j = 0; j < 2; ++j) {
-      ImageLine const& l = (*lines)[j];
+      ImageLine const& l = v.truth.lines[j];
       Eigen::Vector2d const n = l.head<2>();
-      Eigen::Vector2d p = footOnLine(l, entry);
-      Eigen::Vector2d q = footOnLine(l, tip_px);
+      Eigen::Vector2d p = footOnLine(l, v.truth.entry_px);
+      Eigen::Vector2d q = footOnLine(l, v.truth.tip_px);
       Eigen::Vector2d const p0 = p, q0 = q;
       double const s = options_.line_noise_px;
       if (s > 0.0) {

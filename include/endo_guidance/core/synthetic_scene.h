@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -45,6 +46,13 @@ struct SyntheticView {
   ApparentContour truth;           ///< exact contour lines (ApparentContour order), entry, tip
   ApparentContour measured;        ///< lines through noisy endpoints, with their covariance
 };
+
+/// The view of one shaft (radius, through trocar_c to tip_c, camera frame) by a camera K of
+/// width x height: exact contour lines, entry and tip pixels (measured = truth). nullopt when the
+/// tip is outside the image, behind the camera, or less than 40 px of shaft is seen. The
+/// renderer draws exactly these lines (the simulator and the synthetic scene share it).
+std::optional<SyntheticView> viewOfInstrument(Eigen::Matrix3d const& K, int width, int height, Eigen::Vector3d const& trocar_c,
+                                              Eigen::Vector3d const& tip_c, double radius, int instrument = 0);
 
 /// The default 3-instrument scene of the demo and the tests: a 640x480 endoscope, trocars 6-12 cm
 /// off-axis around the camera, tips moving 10-15 cm in front of it.
