@@ -101,6 +101,22 @@ void BM_Stage_Segmentation(benchmark::State& st) {
   for (auto _ : st) benchmark::DoNotOptimize(seg.process(f.images[i++ % f.images.size()]));
 }
 
+// The simulator's cost per frame: rendering three instruments on textured tissue (its frame
+// rate is bounded by 1 / this).
+void BM_SimulatorRender(benchmark::State& st) {
+  int const w = static_cast<int>(st.range(0)), h = static_cast<int>(st.range(1));
+  frames(w, h);  // same K as the other benchmarks
+  SyntheticSceneOptions so;
+  double const s = w / 640.0;
+  so.width = w;
+  so.height = h;
+  so.K << 500 * s, 0, (w - 1) / 2.0, 0, 500 * s, (h - 1) / 2.0, 0, 0, 1;
+  SyntheticScene scene(defaultInstruments(), so);
+  SceneRenderer r(w, h, RenderOptions{});
+  int k = 0;
+  for (auto _ : st) benchmark::DoNotOptimize(r.render(scene.frame(k), k).data), ++k;
+}
+
 void sizes(benchmark::internal::Benchmark* b) {
   for (auto const& s : kSizes) b->Args({s[0], s[1]});
   b->ArgNames({"w", "h"});
@@ -112,6 +128,7 @@ BENCHMARK(BM_Stage_Resize)->Apply(sizes);
 BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
 BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);
 BENCHMARK(BM_Stage_Segmentation)->Apply(sizes);
+BENCHMARK(BM_SimulatorRender)->Apply(sizes);
 
 }  // namespace
 

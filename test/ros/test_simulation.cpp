@@ -149,6 +149,37 @@ TEST_F(Simulation, CommandInTheWrongFrameIsIgnored) {
   EXPECT_EQ(joints_.get().position.at(4), before);
 }
 
+// The whole chain in the simulated operating room (simulation_pipeline.test: scripted motion and
+// the vision pipeline): the estimated trocars, on tf, converge to the simulator's truth.
+TEST(SimulatedSurgery, EstimatedTrocarsMatchTheTruth) {
+  ros::NodeHandle nh;
+  tf2_ros::Buffer buffer;
+  tf2_ros::TransformListener listener(buffer);
+  InsertionPointArray::ConstPtr est;
+  int well = 0;
+  for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < 60.0 && well < 3;) {
+    est = ros::topic::waitForMessage<InsertionPointArray>("endoscope/insertion_points", nh, ros::Duration(5.0));
+    well = 0;
+    if (est)
+      for (auto const& p : est->points) well += p.well_conditioned;
+  }
+  ASSERT_TRUE(est);
+  ASSERT_EQ(well, 3) << "the pipeline did not find the three trocars within 60 s";
+  ros::WallDuration(3.0).sleep();  // a few more seconds of views
+  auto const truth = ros::topic::waitForMessage<InsertionPointArray>("endoscope/truth/insertion_points", nh, ros::Duration(5.0));
+  ASSERT_TRUE(truth);
+  est = ros::topic::waitForMessage<InsertionPointArray>("endoscope/insertion_points", nh, ros::Duration(5.0));
+  for (auto const& p : est->points) {
+    if (!p.well_conditioned) continue;
+    auto const t = buffer.lookupTransform("endoscope_optical_frame", "trocar_" + std::to_string(p.id), ros::Time(0), ros::Duration(2.0));
+    Eigen::Vector3d const X(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
+    double best = 1e9;
+    for (auto const& q : truth->points) best = std::min(best, (X - Eigen::Vector3d(q.position.x, q.position.y, q.position.z)).norm());
+    std::printf("[ simulated surgery ] trocar_%d (tf): %.2f mm from the true trocar, %u views\n", p.id, best * 1e3, p.views);
+    EXPECT_LT(best, 0.003);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
