@@ -7,6 +7,7 @@
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
+#include <pluginlib/class_loader.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
 #include <tf2_eigen/tf2_eigen.h>
@@ -48,7 +49,7 @@ class RcmDriverNodelet : public nodelet::Nodelet {
   struct Arm {
     std::string name;
     core::RcmKinematics kinematics;
-    std::unique_ptr<core::ArmHardware> hardware;
+    boost::shared_ptr<core::ArmHardware> hardware;
     core::CommandWatchdog watchdog;
     core::RcmJoints command = core::RcmJoints::Zero();
     core::RcmJoints q = core::RcmJoints::Zero(), rate = core::RcmJoints::Zero();
@@ -62,6 +63,7 @@ class RcmDriverNodelet : public nodelet::Nodelet {
   std::string frame(std::string const& what, std::size_t i) const { return prefix_ + what + "_" + std::to_string(i); }
 
   ros::NodeHandle nh_, pnh_;
+  std::unique_ptr<pluginlib::ClassLoader<core::ArmHardware>> loader_;
   std::mutex mutex_;
   std::vector<Arm> arms_;
   core::RcmLimits limits_;
@@ -84,6 +86,8 @@ void RcmDriverNodelet::onInit() {
   pnh_.param("watchdog_timeout", timeout, 0.2);
   pnh_.param<std::string>("base_frame", base_frame_, "robot_base");
   pnh_.param<std::string>("frame_prefix", prefix_, "");
+  std::string hardware;
+  pnh_.param<std::string>("hardware", hardware, "endo_guidance/SimulatedArm");
   pnh_.param("limits/max_cone", limits_.max_cone, limits_.max_cone);
   pnh_.param("limits/min_depth", limits_.min_depth, limits_.min_depth);
   pnh_.param("limits/max_depth", limits_.max_depth, limits_.max_depth);
@@ -106,12 +110,16 @@ void RcmDriverNodelet::onInit() {
       a.kinematics.trocar = poseFromXyzRpy(doubles(arms[i]["trocar_xyz"], 3, a.name + ".trocar_xyz"),
                                            doubles(arms[i]["trocar_rpy"], 3, a.name + ".trocar_rpy"));
       auto const q0 = doubles(arms[i]["initial"], 4, a.name + ".initial");
-      a.hardware = std::make_unique<core::SimulatedArm>(core::RcmJoints(q0[0], q0[1], q0[2], q0[3]), limits_);
+      if (!loader_) loader_ = std::make_unique<pluginlib::ClassLoader<core::ArmHardware>>("endo_guidance", "endo_guidance::core::ArmHardware");
+      a.hardware = loader_->createInstance(hardware);  // throws pluginlib::PluginlibException if unknown
+      std::string error;
+      if (!a.hardware->configure(a.name, core::RcmJoints(q0[0], q0[1], q0[2], q0[3]), limits_, &error))
+        throw std::runtime_error(a.name + ": hardware '" + hardware + "' refused the configuration: " + error);
       a.watchdog = core::CommandWatchdog(timeout);
       arms_.push_back(std::move(a));
     }
-  } catch (std::exception const& e) {
-    NODELET_FATAL_STREAM("RcmDriver: bad parameters, no arm is driven: " << e.what());
+  } catch (std::exception const& e) {  // incl. pluginlib::PluginlibException
+    NODELET_FATAL_STREAM("RcmDriver: bad parameters or hardware, no arm is driven: " << e.what());
     return;
   }
   joints_pub_ = nh_.advertise<sensor_msgs::JointState>("joint_states", 10);
@@ -221,3 +229,4 @@ void RcmDriverNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
 }  // namespace endo_guidance
 
 PLUGINLIB_EXPORT_CLASS(endo_guidance::RcmDriverNodelet, nodelet::Nodelet)
+PLUGINLIB_EXPORT_CLASS(endo_guidance::core::SimulatedArm, endo_guidance::core::ArmHardware)

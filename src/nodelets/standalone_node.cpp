@@ -1,5 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
-// A nodelet run as its own node (image_proc's pattern): `rosrun endo_guidance <name>_node`.
+// A nodelet run as its own node (image_proc's pattern): pipeline.launch standalone:=true starts
+// build/devel/lib/endo_guidance/<name>_node (ROS remappings and private parameters as usual).
 // ENDO_NODELET_TYPE is set per executable by CMake.
 #include <nodelet/loader.h>
 #include <ros/ros.h>

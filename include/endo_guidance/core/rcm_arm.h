@@ -65,10 +65,15 @@ class CommandWatchdog {
 };
 
 /// The hardware seam: what the driver needs of an arm. A real AESOP (serial) driver implements
-/// this; SimulatedArm ships.
+/// this and is exported as a pluginlib class of base endo_guidance::core::ArmHardware (the
+/// RcmDriver loads it by name from its `hardware` parameter); SimulatedArm ships.
 class ArmHardware {
  public:
   virtual ~ArmHardware() = default;
+  /// Called once before any other call: the arm's name (its parameter namespace, e.g. for a
+  /// serial port), its initial joints (a simulation starts there; a real arm ignores them) and
+  /// the limits it must enforce itself as a second line of defence. false + *error on failure.
+  virtual bool configure(std::string const& name, RcmJoints const& initial, RcmLimits const& limits, std::string* error) = 0;
   /// Measured joints and rates; false if the arm cannot be read (the driver then stops it).
   virtual bool read(RcmJoints& q, RcmJoints& rate) = 0;
   /// Commands joint rates (already limited by the driver); false on a communication error.
@@ -81,7 +86,18 @@ class ArmHardware {
 /// An ideal arm: the commanded rate is integrated exactly, positions clamped to the limits.
 class SimulatedArm : public ArmHardware {
  public:
+  SimulatedArm() = default;
   SimulatedArm(RcmJoints const& initial, RcmLimits const& limits) : q_(limits.clamp(initial)), limits_(limits) {}
+  bool configure(std::string const&, RcmJoints const& initial, RcmLimits const& limits, std::string* error) override {
+    if (!initial.allFinite()) {
+      if (error) *error = "non-finite initial joints";
+      return false;
+    }
+    limits_ = limits;
+    q_ = limits.clamp(initial);
+    rate_.setZero();
+    return true;
+  }
   bool read(RcmJoints& q, RcmJoints& rate) override {
     q = q_;
     rate = rate_;
@@ -95,7 +111,7 @@ class SimulatedArm : public ArmHardware {
   std::string name() const override { return "simulated"; }
 
  private:
-  RcmJoints q_, rate_ = RcmJoints::Zero();
+  RcmJoints q_ = RcmJoints::Zero(), rate_ = RcmJoints::Zero();
   RcmLimits limits_;
 };
 
