@@ -15,13 +15,21 @@ set +u; source build/devel/setup.bash; set -u
 export ROS_MASTER_URI="http://localhost:$((12000 + RANDOM % 5000))"
 export ROS_HOME="${ROS_HOME:-$PWD/build/ros_home}"
 mkdir -p "$ROS_HOME"
-xvfb-run -a -s "-screen 0 1280x800x24" bash -c "
-  roslaunch -p \${ROS_MASTER_URI##*:} endo_guidance replay.launch bag:='$BAG' rviz:=true start_delay:=4 loop:=true >'$ROS_HOME/rviz_screenshot.log' 2>&1 &
-  pid=\$!
-  sleep 22
-  import -window root '$OUT'
-  kill -INT \$pid; wait \$pid || true
-"
+shoot() {
+  xvfb-run -a -s "-screen 0 1280x800x24" bash -c "
+    roslaunch -p \${ROS_MASTER_URI##*:} endo_guidance replay.launch bag:='$BAG' rviz:=true start_delay:=4 loop:=true >'$ROS_HOME/rviz_screenshot.log' 2>&1 &
+    pid=\$!
+    sleep 22
+    import -window root '$OUT'
+    kill -INT \$pid; wait \$pid || true
+  "
+}
+shoot
+# rviz (Mesa llvmpipe) has been seen to abort at start-up on a loaded machine: one more try.
+if grep -q "rviz-[0-9]*\] process has died" "$ROS_HOME/rviz_screenshot.log"; then
+  echo "rviz died at start-up (see $ROS_HOME/rviz_screenshot.log); trying once more"
+  shoot
+fi
 /usr/bin/python3 - "$OUT" <<'PY'
 import sys, cv2, numpy as np
 img = cv2.imread(sys.argv[1])
