@@ -124,14 +124,16 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
         dst = dst * (1.f - cov) + col * cov;
       }
     }
-    // Jaws: two metal wedges beyond the tip, opening and closing with k.
+    // Jaws: two metal wedges beyond the tip, opening and closing with k; 1.6 widths long, or up
+    // to the projected 3D jaw end when the view has one.
     double const open = 0.15 + 0.1 * std::sin(0.2 * k + v->instrument);
+    double const jaw = v->jaw_end_px.allFinite() ? (v->jaw_end_px - c.tip_px).norm() / std::cos(open) : 1.6 * w_tip;
     Eigen::Vector2d const nrm(-dir.y(), dir.x());
     for (int j = -1; j <= 1; j += 2) {
       Eigen::Vector2d const a0 = c.tip_px + nrm * (0.25 * j * w_tip);
       Eigen::Vector2d const jd = (dir + nrm * (j * open)).normalized();
-      Eigen::Vector2d const a1 = a0 + jd * (1.6 * w_tip) + nrm * (0.12 * j * w_tip);
-      Eigen::Vector2d const a2 = a0 + jd * (1.6 * w_tip) - nrm * (0.12 * j * w_tip);
+      Eigen::Vector2d const a1 = a0 + jd * jaw + nrm * (0.12 * j * w_tip);
+      Eigen::Vector2d const a2 = a0 + jd * jaw - nrm * (0.12 * j * w_tip);
       Eigen::Vector2d const a3 = a0 - nrm * (0.25 * j * w_tip);
       std::vector<cv::Point> poly;
       for (auto const& q : {a0, a1, a2, a3}) poly.emplace_back(static_cast<int>(q.x()), static_cast<int>(q.y()));

@@ -26,7 +26,7 @@ Eigen::Vector3d SyntheticScene::trocarAt(int i, int k) const {
 }
 
 std::optional<SyntheticView> viewOfInstrument(Eigen::Matrix3d const& K, int width, int height, Eigen::Vector3d const& trocar_c,
-                                              Eigen::Vector3d const& tip_c, double radius, int instrument) {
+                                              Eigen::Vector3d const& tip_c, double radius, int instrument, double jaw_length) {
   SyntheticView v;
   v.instrument = instrument;
   v.radius = radius;
@@ -55,6 +55,13 @@ std::optional<SyntheticView> viewOfInstrument(Eigen::Matrix3d const& K, int widt
   v.truth.entry_px = entry;
   v.truth.tip_px = tip_px;
   v.measured = v.truth;
+  if (jaw_length > 0.0) {
+    Eigen::Vector3d const je = K * (tip_c + jaw_length * v.axis.direction());
+    if (je.z() <= 0.0) return std::nullopt;
+    v.jaw_end_px = je.head<2>() / je.z();
+    if (v.jaw_end_px.x() < 0 || v.jaw_end_px.y() < 0 || v.jaw_end_px.x() > width - 1 || v.jaw_end_px.y() > height - 1)
+      return std::nullopt;
+  }
   return v;
 }
 

@@ -110,7 +110,7 @@ void CameraBaseRotation::add(Eigen::Vector3d const& d_camera, Eigen::Vector3d co
   if (!d_camera.allFinite() || !d_base.allFinite() || d_camera.norm() < 1e-9 || d_base.norm() < 1e-9) return;
   pairs_.emplace_back(d_camera.normalized(), d_base.normalized());
   while (pairs_.size() > window_) pairs_.pop_front();
-  if (pairs_.size() < 10) return;
+  if (pairs_.size() < 50) return;
   Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (auto const& [c, b] : pairs_) {

@@ -11,6 +11,7 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
+#include <std_srvs/SetBool.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/static_transform_broadcaster.h>
@@ -19,6 +20,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <atomic>
 #include <memory>
 
 #include "endo_guidance/InsertionPointArray.h"
@@ -44,6 +46,8 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> listener_;
   std::unique_ptr<tf2_ros::StaticTransformBroadcaster> static_tf_;
   ros::WallTimer timer_;
+  ros::ServiceServer occlude_srv_;
+  std::atomic<bool> occluded_{false};  // e.g. smoke or a fogged lens: no instrument is drawn
   sensor_msgs::CameraInfo info_;
   Eigen::Matrix3d K_;
   Eigen::Isometry3d base_to_camera_ = Eigen::Isometry3d::Identity();
@@ -51,7 +55,7 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   cv::Mat distortion_map_;
   std::vector<std::string> arms_;
   std::string prefix_, base_frame_, camera_frame_;
-  double radius_ = 0.004, breathing_amplitude_ = 0.0, breathing_period_ = 4.0;
+  double radius_ = 0.004, jaw_length_ = 0.012, breathing_amplitude_ = 0.0, breathing_period_ = 4.0;
   Eigen::Vector3d breathing_direction_ = Eigen::Vector3d(0.2, -1.0, 0.3).normalized();
   int frame_ = 0;
   ros::WallTime start_;
@@ -70,6 +74,7 @@ void EndoscopeSimulatorNodelet::onInit() {
   pnh_.param("cx", cx, (width - 1) / 2.0);
   pnh_.param("cy", cy, (height - 1) / 2.0);
   pnh_.param("radius", radius_, 0.004);
+  pnh_.param("jaw_length", jaw_length_, 0.012);
   pnh_.param("breathing_amplitude", breathing_amplitude_, 0.0);
   pnh_.param("breathing_period", breathing_period_, 4.0);
   pnh_.param<std::string>("frame_prefix", prefix_, "");
@@ -131,6 +136,13 @@ void EndoscopeSimulatorNodelet::onInit() {
   pose.header = t.header;
   pose.pose = tf2::toMsg(base_to_camera_);
   truth_pose_pub_.publish(pose);
+  occlude_srv_ = pnh_.advertiseService<std_srvs::SetBool::Request, std_srvs::SetBool::Response>(
+      "occlude", [this](std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res) {
+        occluded_ = req.data;
+        res.success = true;
+        res.message = req.data ? "instruments hidden" : "instruments visible";
+        return true;
+      });
   start_ = ros::WallTime::now();
   timer_ = nh_.createWallTimer(ros::WallDuration(1.0 / rate), &EndoscopeSimulatorNodelet::tick, this);
   NODELET_INFO_STREAM("EndoscopeSimulator: " << width << "x" << height << " at " << rate << " Hz, " << arms_.size() << " arm(s)");
@@ -168,14 +180,16 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
     InsertionPoint p;
     if (ros_io::toMsg(r, p)) points->points.push_back(p);
     auto const view = core::viewOfInstrument(K_, static_cast<int>(info_.width), static_cast<int>(info_.height), trocar_c, tip_c,
-                                             radius_, static_cast<int>(i));
+                                             radius_, static_cast<int>(i), jaw_length_);
     if (!view) continue;  // tip out of view
-    views.push_back(*view);
+    if (!occluded_) views.push_back(*view);
     core::CylinderPose pose;
     pose.axis = view->axis;
     pose.distance = view->axis.distanceToOrigin();
     InstrumentAxis a;
-    if (ros_io::toMsg(pose, radius_, 0.0, tip_c, a)) {
+    // The visible tip: the end of the jaws, jaw_length beyond the shaft's end (the driver's tip frame).
+    Eigen::Vector3d const jaw_end = tip_c + jaw_length_ * view->axis.direction();
+    if (ros_io::toMsg(pose, radius_, 0.0, jaw_end, a)) {
       a.insertion_point_id = static_cast<int>(i);
       a.track_id = static_cast<int>(i);
       axes->axes.push_back(a);

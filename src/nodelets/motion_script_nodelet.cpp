@@ -1,7 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // endo_guidance/MotionScript: a scripted "surgeon" for the simulation: smooth sinusoidal
 // InstrumentVelocity commands (pan, tilt, insertion, roll) to each arm, so that the shafts sweep
-// about their trocars as in surgery (the vision pipeline needs that angular spread).
+// about their trocars as in surgery (the vision pipeline needs that angular spread); with
+// `duration` > 0 it stops after that many seconds (then another commander, e.g. the servo, takes over).
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -23,6 +24,7 @@ class MotionScriptNodelet : public nodelet::Nodelet {
     pnh.param<std::string>("frame_prefix", prefix_, "");
     pnh.param("amplitude", amplitude_, std::vector<double>{0.12, 0.12, 0.012, 0.3});
     pnh.param("period", period_, std::vector<double>{7.0, 5.3, 9.1, 11.0});
+    pnh.param("duration", duration_, 0.0);
     if (amplitude_.size() != 4 || period_.size() != 4 || !(rate > 0.0)) {
       NODELET_FATAL("MotionScript: amplitude and period need 4 values, rate > 0");
       return;
@@ -35,6 +37,19 @@ class MotionScriptNodelet : public nodelet::Nodelet {
  private:
   void tick() {
     double const t = (ros::WallTime::now() - start_).toSec();
+    if (duration_ > 0.0 && t > duration_) {  // done: hand the arms over (one zero command, then silence)
+      if (!finished_) {
+        for (std::size_t i = 0; i < pubs_.size(); ++i) {
+          InstrumentVelocity c;
+          c.header.stamp = ros::Time::now();
+          c.header.frame_id = prefix_ + "trocar_" + std::to_string(i);
+          pubs_[i].publish(c);
+        }
+        NODELET_INFO("MotionScript: done after %.1f s", duration_);
+      }
+      finished_ = true;
+      return;
+    }
     for (std::size_t i = 0; i < pubs_.size(); ++i) {
       // q_j(t) = A_j sin(w_j t + phase): the commanded rate is its derivative.
       auto rate = [&](int j) {
@@ -54,6 +69,8 @@ class MotionScriptNodelet : public nodelet::Nodelet {
   std::vector<std::string> arms_;
   std::string prefix_;
   std::vector<double> amplitude_, period_;
+  double duration_ = 0.0;  // s, 0 = forever
+  bool finished_ = false;
   std::vector<ros::Publisher> pubs_;
   ros::WallTimer timer_;
   ros::WallTime start_;

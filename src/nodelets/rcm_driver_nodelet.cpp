@@ -2,7 +2,7 @@
 // endo_guidance/RcmDriver: AESOP-style instrument holders. Per arm, InstrumentVelocity commands
 // (in its trocar frame) -> limited joint rates -> the hardware (ArmHardware; SimulatedArm
 // ships). Watchdog: no command for watchdog_timeout -> zero rate. Publishes joint_states, tf
-// base -> trocar_k -> instrument_k -> instrument_k_tip, diagnostics. A thin adapter over
+// base -> trocar_k -> instrument_k -> instrument_k_tip (every cycle), diagnostics. A thin adapter over
 // core/rcm_arm.
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -11,7 +11,6 @@
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
 #include <tf2_eigen/tf2_eigen.h>
-#include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
 
 #include <memory>
@@ -73,7 +72,6 @@ class RcmDriverNodelet : public nodelet::Nodelet {
   ros::SteadyTime last_step_;
   ros::Publisher joints_pub_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
-  std::unique_ptr<tf2_ros::StaticTransformBroadcaster> static_tf_;
   std::unique_ptr<diagnostic_updater::Updater> updater_;
   ros::Timer diag_timer_;
 };
@@ -124,18 +122,10 @@ void RcmDriverNodelet::onInit() {
   }
   joints_pub_ = nh_.advertise<sensor_msgs::JointState>("joint_states", 10);
   tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
-  static_tf_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
-  std::vector<geometry_msgs::TransformStamped> statics;
   for (std::size_t i = 0; i < arms_.size(); ++i) {
-    auto t = tf2::eigenToTransform(arms_[i].kinematics.trocar);
-    t.header.stamp = ros::Time::now();
-    t.header.frame_id = base_frame_;
-    t.child_frame_id = frame("trocar", i);
-    statics.push_back(t);
     arms_[i].sub = nh_.subscribe<InstrumentVelocity>(arms_[i].name + "/command", 5,
                                                      [this, i](InstrumentVelocity::ConstPtr const& m) { commandCb(i, m); });
   }
-  static_tf_->sendTransform(statics);
   updater_ = std::make_unique<diagnostic_updater::Updater>(nh_, pnh_, getName());
   updater_->setHardwareID("rcm_arms");
   updater_->add("rcm_driver", this, &RcmDriverNodelet::diagnostics);
@@ -188,6 +178,13 @@ void RcmDriverNodelet::step(ros::SteadyTimerEvent const&) {
       js.position.push_back(a.q(j));
       js.velocity.push_back(a.rate(j));
     }
+    // base -> trocar with every cycle (not /tf_static: several static broadcasters in one
+    // nodelet manager share one latched publication, and the last one would hide the others).
+    auto tb = tf2::eigenToTransform(a.kinematics.trocar);
+    tb.header.stamp = js.header.stamp;
+    tb.header.frame_id = base_frame_;
+    tb.child_frame_id = frame("trocar", i);
+    tfs.push_back(tb);
     Eigen::Isometry3d const I = a.kinematics.trocar.inverse() * a.kinematics.instrument(a.q);
     auto ti = tf2::eigenToTransform(I);
     ti.header.stamp = js.header.stamp;

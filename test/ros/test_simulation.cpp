@@ -99,16 +99,19 @@ TEST_F(Simulation, GroundTruthMatchesTf) {
     EXPECT_NEAR(t.transform.translation.y, p.position.y, 1e-6);
     EXPECT_NEAR(t.transform.translation.z, p.position.z, 1e-6);
   }
+  double jaw = 0.0;
+  ASSERT_TRUE(ros::param::get("/endoscope_simulator/jaw_length", jaw));
   for (auto const& a : axes->axes) {
     ASSERT_TRUE(a.tip_valid);
     auto const t = buffer.lookupTransform("endoscope_optical_frame", "sim/instrument_" + std::to_string(a.insertion_point_id) + "_tip",
                                           ros::Time(0), ros::Duration(3.0));
-    EXPECT_NEAR(t.transform.translation.x, a.tip.x, 1e-6);
-    EXPECT_NEAR(t.transform.translation.y, a.tip.y, 1e-6);
-    EXPECT_NEAR(t.transform.translation.z, a.tip.z, 1e-6);
+    Eigen::Vector3d const d(a.axis.direction.x, a.axis.direction.y, a.axis.direction.z), m(a.axis.moment.x, a.axis.moment.y, a.axis.moment.z);
+    // The truth's tip is the visible one: the jaws' end, jaw_length beyond the driver's tip frame.
+    EXPECT_NEAR(t.transform.translation.x + jaw * d.x(), a.tip.x, 1e-6);
+    EXPECT_NEAR(t.transform.translation.y + jaw * d.y(), a.tip.y, 1e-6);
+    EXPECT_NEAR(t.transform.translation.z + jaw * d.z(), a.tip.z, 1e-6);
     // The true axis passes through its trocar (moment = p x d with p the trocar).
     auto const& tp = points->points[static_cast<std::size_t>(a.insertion_point_id)].position;
-    Eigen::Vector3d const d(a.axis.direction.x, a.axis.direction.y, a.axis.direction.z), m(a.axis.moment.x, a.axis.moment.y, a.axis.moment.z);
     EXPECT_LT((Eigen::Vector3d(tp.x, tp.y, tp.z).cross(d) - m).norm(), 1e-9);
   }
 }

@@ -45,14 +45,20 @@ struct SyntheticView {
   PluckerLine axis;                ///< true axis, direction trocar -> tip
   ApparentContour truth;           ///< exact contour lines (ApparentContour order), entry, tip
   ApparentContour measured;        ///< lines through noisy endpoints, with their covariance
+  /// Pixel of the jaws' end (the visible tip) when the jaws have a 3D length (viewOfInstrument's
+  /// jaw_length > 0); NaN: the renderer draws jaws 1.6 shaft widths long in the image.
+  Eigen::Vector2d jaw_end_px = Eigen::Vector2d::Constant(NAN);
 };
 
 /// The view of one shaft (radius, through trocar_c to tip_c, camera frame) by a camera K of
 /// width x height: exact contour lines, entry and tip pixels (measured = truth). nullopt when the
 /// tip is outside the image, behind the camera, or less than 40 px of shaft is seen. The
 /// renderer draws exactly these lines (the simulator and the synthetic scene share it).
+/// jaw_length > 0: the jaws continue the shaft that far beyond tip_c (metres) and their end,
+/// tip_c + jaw_length d, is the visible tip (jaw_end_px; it must be in the image too).
 std::optional<SyntheticView> viewOfInstrument(Eigen::Matrix3d const& K, int width, int height, Eigen::Vector3d const& trocar_c,
-                                              Eigen::Vector3d const& tip_c, double radius, int instrument = 0);
+                                              Eigen::Vector3d const& tip_c, double radius, int instrument = 0,
+                                              double jaw_length = 0.0);
 
 /// The default 3-instrument scene of the demo and the tests: a 640x480 endoscope, trocars 6-12 cm
 /// off-axis around the camera, tips moving 10-15 cm in front of it.

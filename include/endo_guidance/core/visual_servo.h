@@ -79,7 +79,7 @@ class TrocarServo {
 class CameraBaseRotation {
  public:
   CameraBaseRotation(Eigen::Matrix3d const& prior = Eigen::Matrix3d::Identity(), std::size_t window = 400,
-                     double min_spread = 0.002)
+                     double min_spread = 0.05)
       : prior_(prior), window_(window), min_spread_(min_spread) {}
   void add(Eigen::Vector3d const& d_camera, Eigen::Vector3d const& d_base);
   /// The estimate when conditioned, else the prior.
