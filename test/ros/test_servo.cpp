@@ -47,6 +47,11 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
     if (s->active) latencies.push_back(s->latency);
   });
   ros::Publisher target_pub = nh.advertise<ServoTarget>("visual_servo/target", 2, true);
+  Eigen::Vector3d true_trocar = Eigen::Vector3d::Constant(NAN);  // arm_0's, with breathing
+  auto truth_sub = nh.subscribe<InsertionPointArray>("endoscope/truth/insertion_points", 5, [&](InsertionPointArray::ConstPtr const& t) {
+    std::lock_guard<std::mutex> l(m);
+    if (!t->points.empty()) true_trocar = Eigen::Vector3d(t->points[0].position.x, t->points[0].position.y, t->points[0].position.z);
+  });
 
   // 1. The pipeline finds the trocars while the scripted surgeon moves the arms.
   double explore = 12.0;
@@ -115,9 +120,12 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
         continue;
       }
       // The simulator adds the breathing displacement to what it renders: the true trocar now.
-      auto const tr = ros::topic::waitForMessage<InsertionPointArray>("endoscope/truth/insertion_points", nh, ros::Duration(0.2));
-      Eigen::Vector3d b = Eigen::Vector3d::Zero();
-      if (tr) b = Eigen::Vector3d(tr->points.at(0).position.x, tr->points.at(0).position.y, tr->points.at(0).position.z) - cT.translation();
+      Eigen::Vector3d b;
+      {
+        std::lock_guard<std::mutex> l(m);
+        b = true_trocar - cT.translation();
+      }
+      if (!b.allFinite()) continue;
       Eigen::Vector3d const T = cT.translation() + b;
       Eigen::Vector3d const P = tip.translation() + b + jaw * (tip.translation() - cT.translation()).normalized();
       if (u0.isZero()) u0 = (P - P_star).normalized();
