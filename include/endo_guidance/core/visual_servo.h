@@ -36,7 +36,7 @@ struct ServoMeasurement {
 };
 
 struct ServoParams {
-  double gain_at_zero = 6.0;       ///< adaptive gain (vpAdaptiveGain): lambda(0), high enough to follow breathing
+  double gain_at_zero = 10.0;      ///< adaptive gain (vpAdaptiveGain): lambda(0), high enough to follow breathing
   double gain_at_infinity = 0.8;   ///< lambda(inf)
   double gain_slope = 60.0;        ///< slope of lambda at 0
   RcmJoints max_rate{0.15, 0.15, 0.02, 0.5};  ///< saturation (rad/s, m/s): vpRobot::saturateVelocities
