@@ -26,16 +26,22 @@ struct Frames {
   Eigen::Matrix3d K;
 };
 
-// 16 rendered frames of the default scene at the given size (K scaled from 640x480).
+// The default scene at the given size (K scaled from 640x480).
+SyntheticSceneOptions sceneAt(int w, int h) {
+  SyntheticSceneOptions so;
+  double const s = w / 640.0;
+  so.width = w;
+  so.height = h;
+  so.K << 500 * s, 0, (w - 1) / 2.0, 0, 500 * s, (h - 1) / 2.0, 0, 0, 1;
+  return so;
+}
+
+// 48 rendered frames of the default scene at the given size.
 Frames const& frames(int w, int h) {
   static std::map<int, Frames> cache;
   Frames& f = cache[w];
   if (f.images.empty()) {
-    SyntheticSceneOptions so;
-    double const s = w / 640.0;
-    so.width = w;
-    so.height = h;
-    so.K << 500 * s, 0, (w - 1) / 2.0, 0, 500 * s, (h - 1) / 2.0, 0, 0, 1;
+    SyntheticSceneOptions const so = sceneAt(w, h);
     SyntheticScene scene(defaultInstruments(), so);
     SceneRenderer r(w, h, RenderOptions{});
     // Consecutive frames, as a video (the segmentation carries each shaft's level across frames).
@@ -105,13 +111,7 @@ void BM_Stage_Segmentation(benchmark::State& st) {
 // rate is bounded by 1 / this).
 void BM_SimulatorRender(benchmark::State& st) {
   int const w = static_cast<int>(st.range(0)), h = static_cast<int>(st.range(1));
-  frames(w, h);  // same K as the other benchmarks
-  SyntheticSceneOptions so;
-  double const s = w / 640.0;
-  so.width = w;
-  so.height = h;
-  so.K << 500 * s, 0, (w - 1) / 2.0, 0, 500 * s, (h - 1) / 2.0, 0, 0, 1;
-  SyntheticScene scene(defaultInstruments(), so);
+  SyntheticScene scene(defaultInstruments(), sceneAt(w, h));
   SceneRenderer r(w, h, RenderOptions{});
   int k = 0;
   for (auto _ : st) benchmark::DoNotOptimize(r.render(scene.frame(k), k).data), ++k;

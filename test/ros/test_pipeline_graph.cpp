@@ -26,6 +26,7 @@
 #include "endo_guidance/ResetInsertionPoint.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/synthetic_scene.h"
+#include "ros_test_main.h"
 
 using namespace endo_guidance;
 
@@ -402,12 +403,4 @@ TEST_F(Graph, DistortedImagesGiveRectifiedContours) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_pipeline_graph");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  int const r = RUN_ALL_TESTS();
-  spinner.stop();
-  return r;
-}
+int main(int argc, char** argv) { return endo_guidance::test::runRosTests(argc, argv, "test_pipeline_graph", 2); }

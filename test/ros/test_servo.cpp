@@ -22,6 +22,7 @@
 #include "endo_guidance/InstrumentVelocity.h"
 #include "endo_guidance/ServoState.h"
 #include "endo_guidance/ServoTarget.h"
+#include "ros_test_main.h"
 
 using namespace endo_guidance;
 
@@ -58,12 +59,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   ros::param::get("/motion_script/duration", explore);
   InsertionPointArray::ConstPtr est, truth;
   int well = 0;
-  for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < 60.0 && well < 3;) {
-    est = ros::topic::waitForMessage<InsertionPointArray>("endoscope/insertion_points", nh, ros::Duration(5.0));
-    well = 0;
-    if (est)
-      for (auto const& p : est->points) well += p.well_conditioned;
-  }
+  est = endo_guidance::test::waitForTrocars(nh, 3, &well);
   ASSERT_EQ(well, 3) << "the pipeline did not find the three trocars";
   for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < explore + 2.0;) {
     // wait until the scripted motion is over (its duration counts from its start)
@@ -208,12 +204,4 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_servo");
-  ros::AsyncSpinner spinner(3);
-  spinner.start();
-  int const r = RUN_ALL_TESTS();
-  spinner.stop();
-  return r;
-}
+int main(int argc, char** argv) { return endo_guidance::test::runRosTests(argc, argv, "test_servo", 3); }

@@ -17,6 +17,7 @@
 #include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/InstrumentAxisArray.h"
 #include "endo_guidance/InstrumentVelocity.h"
+#include "ros_test_main.h"
 
 using namespace endo_guidance;
 
@@ -160,12 +161,7 @@ TEST(SimulatedSurgery, EstimatedTrocarsMatchTheTruth) {
   tf2_ros::TransformListener listener(buffer);
   InsertionPointArray::ConstPtr est;
   int well = 0;
-  for (ros::WallTime t0 = ros::WallTime::now(); (ros::WallTime::now() - t0).toSec() < 60.0 && well < 3;) {
-    est = ros::topic::waitForMessage<InsertionPointArray>("endoscope/insertion_points", nh, ros::Duration(5.0));
-    well = 0;
-    if (est)
-      for (auto const& p : est->points) well += p.well_conditioned;
-  }
+  est = endo_guidance::test::waitForTrocars(nh, 3, &well);
   ASSERT_TRUE(est);
   ASSERT_EQ(well, 3) << "the pipeline did not find the three trocars within 60 s";
   ros::WallDuration(3.0).sleep();  // a few more seconds of views
@@ -185,12 +181,4 @@ TEST(SimulatedSurgery, EstimatedTrocarsMatchTheTruth) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_simulation");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  int const r = RUN_ALL_TESTS();
-  spinner.stop();
-  return r;
-}
+int main(int argc, char** argv) { return endo_guidance::test::runRosTests(argc, argv, "test_simulation", 2); }
