@@ -135,9 +135,11 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
       Eigen::Vector2d const a1 = a0 + jd * jaw + nrm * (0.12 * j * w_tip);
       Eigen::Vector2d const a2 = a0 + jd * jaw - nrm * (0.12 * j * w_tip);
       Eigen::Vector2d const a3 = a0 - nrm * (0.25 * j * w_tip);
+      // Sub-pixel vertices (4 fractional bits): truncated integer corners biased the visible tip.
       std::vector<cv::Point> poly;
-      for (auto const& q : {a0, a1, a2, a3}) poly.emplace_back(static_cast<int>(q.x()), static_cast<int>(q.y()));
-      cv::fillConvexPoly(img, poly, cv::Scalar(175, 175, 180), cv::LINE_AA);
+      for (auto const& q : {a0, a1, a2, a3})
+        poly.emplace_back(static_cast<int>(std::lround(q.x() * 16.0)), static_cast<int>(std::lround(q.y() * 16.0)));
+      cv::fillConvexPoly(img, poly, cv::Scalar(175, 175, 180), cv::LINE_AA, 4);
     }
   }
   // Field of view, noise, 8-bit.
