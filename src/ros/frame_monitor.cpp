@@ -41,24 +41,28 @@ std::size_t FrameMonitor::rejectedCount() const {
 }
 
 void FrameMonitor::produce(diagnostic_updater::DiagnosticStatusWrapper& stat) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  double rate = 0.0;
-  if (arrivals_.size() >= 2) rate = (arrivals_.size() - 1) / std::max(1e-6, (arrivals_.back() - arrivals_.front()).toSec());
-  if ((ros::WallTime::now() - (arrivals_.empty() ? ros::WallTime() : arrivals_.back())).toSec() > 2.0) rate = 0.0;
-  stat.add("frames processed", frames_);
-  stat.add("inputs rejected", rejected_);
-  stat.add("input rate (Hz)", rate);
-  stat.add("processing time (ms)", proc_ms_);
-  stat.add("latency (ms)", latency_ms_);
-  stat.add("last error", last_error_.empty() ? std::string("none") : last_error_);
-  if (rejected_since_ > 0)
-    stat.summaryf(diagnostic_msgs::DiagnosticStatus::ERROR, "%zu inputs rejected in the last period: %s", rejected_since_,
-                  last_error_.c_str());
-  else if (expected_hz_ > 0.0 && rate < 0.5 * expected_hz_)
-    stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "input rate %.1f Hz (expected %.1f Hz)", rate, expected_hz_);
-  else
-    stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
-  rejected_since_ = processed_since_ = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    double rate = 0.0;
+    if (arrivals_.size() >= 2) rate = (arrivals_.size() - 1) / std::max(1e-6, (arrivals_.back() - arrivals_.front()).toSec());
+    if ((ros::WallTime::now() - (arrivals_.empty() ? ros::WallTime() : arrivals_.back())).toSec() > 2.0) rate = 0.0;
+    stat.add("frames processed", frames_);
+    stat.add("inputs rejected", rejected_);
+    stat.add("input rate (Hz)", rate);
+    stat.add("processing time (ms)", proc_ms_);
+    stat.add("latency (ms)", latency_ms_);
+    stat.add("last error", last_error_.empty() ? std::string("none") : last_error_);
+    if (rejected_since_ > 0)
+      stat.summaryf(diagnostic_msgs::DiagnosticStatus::ERROR, "%zu inputs rejected in the last period: %s", rejected_since_,
+                    last_error_.c_str());
+    else if (expected_hz_ > 0.0 && rate < 0.5 * expected_hz_)
+      stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "input rate %.1f Hz (expected %.1f Hz)", rate, expected_hz_);
+    else
+      stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
+    rejected_since_ = processed_since_ = 0;
+  }
+  // Outside the lock: the node's callback takes its own lock, and the node calls rejected()
+  // while holding it (one lock order only).
   if (extra_) extra_(stat);
 }
 
