@@ -182,8 +182,12 @@ void VisualServoNodelet::send(Eigen::Vector3d const& r, double roll) {
 }
 
 void VisualServoNodelet::stop(std::string const& reason, std_msgs::Header const& header) {
-  send(Eigen::Vector3d::Zero(), 0.0);
-  if (moving_) ROS_WARN_STREAM_THROTTLE(1.0, "VisualServo: stopped: " << reason);
+  // A zero command when the arm was being driven; an idle servo stays silent (the arm may be
+  // driven by someone else, and the driver's watchdog holds it still).
+  if (moving_ || !last_rate_.isZero()) {
+    send(Eigen::Vector3d::Zero(), 0.0);
+    ROS_WARN_STREAM_THROTTLE(1.0, "VisualServo: stopped: " << reason);
+  }
   moving_ = false;
   ServoState s;
   s.header = header;

@@ -113,6 +113,11 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
       t.depth = q(2) + jaw;  // trocar to the visible tip
     }
     target_pub.publish(t);
+    bool const pixel_mode = t.mode == ServoTarget::TIP_PIXEL;
+    // 3D targets: tip within 1 mm, axis within 0.5 deg; the pixel target: its pixel within 2 px
+    // and the insertion depth within 2 mm (the depth goes through the trocar estimate and the
+    // tip estimate along the shaft, each a few tenths of a mm).
+    double const bound1 = pixel_mode ? 2.0 : 1.0, bound2 = pixel_mode ? 2.0 : 0.5;
     // Score on the truth (tf of the simulated arm), every 40 ms for up to 25 s.
     std::vector<double> tip_err, ax_err;
     double overshoot = 0.0;
@@ -135,12 +140,20 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
       Eigen::Vector3d const T = cT.translation() + b;
       Eigen::Vector3d const P = tip.translation() + b + jaw * (tip.translation() - cT.translation()).normalized();
       if (u0.isZero()) u0 = (P - P_star).normalized();
-      tip_err.push_back((P - P_star).norm() * 1e3);
-      ax_err.push_back(std::acos(std::clamp((P - T).normalized().dot((P_star - T).normalized()), -1.0, 1.0)) * 180 / M_PI);
+      if (pixel_mode) {  // what was asked: the tip's pixel (px) and its insertion depth (mm)
+        Eigen::Vector2d const px(info->K[0] * P.x() / P.z() + info->K[2], info->K[4] * P.y() / P.z() + info->K[5]);
+        tip_err.push_back((px - Eigen::Vector2d(t.tip_px.x, t.tip_px.y)).norm());
+        // Depth from the mean trocar: the target point is fixed in the camera frame while the
+        // true trocar breathes.
+        ax_err.push_back(std::abs((P - cT.translation()).norm() - t.depth) * 1e3);
+      } else {
+        tip_err.push_back((P - P_star).norm() * 1e3);
+        ax_err.push_back(std::acos(std::clamp((P - T).normalized().dot((P_star - T).normalized()), -1.0, 1.0)) * 180 / M_PI);
+      }
       overshoot = std::max(overshoot, -(P - P_star).dot(u0) * 1e3);
       // Converged: both within bounds over the last 4 s (a breathing cycle).
-      if (tip_err.size() >= 100 &&
-          *std::max_element(tip_err.end() - 100, tip_err.end()) < 1.0 && *std::max_element(ax_err.end() - 100, ax_err.end()) < 0.5)
+      if (tip_err.size() >= 100 && *std::max_element(tip_err.end() - 100, tip_err.end()) < bound1 &&
+          *std::max_element(ax_err.end() - 100, ax_err.end()) < bound2)
         break;
     }
     ASSERT_GE(tip_err.size(), 100u);
@@ -148,14 +161,17 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
     double const fin_ax = *std::max_element(ax_err.end() - 100, ax_err.end());
     double settled = 0.0;
     for (std::size_t i = tip_err.size(); i-- > 0;)
-      if (tip_err[i] >= 1.0 || ax_err[i] >= 0.5) {
+      if (tip_err[i] >= bound1 || ax_err[i] >= bound2) {
         settled = (i + 1) * 0.04;
         break;
       }
-    std::printf("[ servo ] %zu       %6.2f      %6.3f       %6.3f         %6.2f\n", g, settled, fin_tip, fin_ax, overshoot);
-    // A pixel target becomes a 3D point through the *estimated* trocar: its error adds up.
-    EXPECT_LT(fin_tip, g + 1 == goals.size() ? 1.5 : 1.0) << "target " << g;
-    EXPECT_LT(fin_ax, 0.5) << "target " << g;
+    if (pixel_mode)
+      std::printf("[ servo ] %zu (pixel + depth) settled %.2f s, tip pixel error %.2f px, depth error %.3f mm, overshoot %.2f mm\n", g,
+                  settled, fin_tip, fin_ax, overshoot);
+    else
+      std::printf("[ servo ] %zu       %6.2f      %6.3f       %6.3f         %6.2f\n", g, settled, fin_tip, fin_ax, overshoot);
+    EXPECT_LT(fin_tip, bound1) << "target " << g;
+    EXPECT_LT(fin_ax, bound2) << "target " << g;
     EXPECT_LT(overshoot, 3.0) << "target " << g;  // stated bound
   }
   {
@@ -185,9 +201,12 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   target_pub.publish(t);
   std::atomic<double> first_hidden_image{0.0}, first_zero{0.0};
   std::atomic<bool> hidden{false};
+  std::atomic<double> hidden_from{1e300};  // sim time after which frames are rendered hidden
   std::atomic<int> nonzero_after{0};
-  auto img_sub = nh.subscribe<sensor_msgs::Image>("endoscope/image_raw", 5, [&](sensor_msgs::Image::ConstPtr const&) {
-    if (hidden && first_hidden_image == 0.0) first_hidden_image = ros::WallTime::now().toSec();
+  // A frame stamped after the occlusion call returned was rendered without the instruments (the
+  // simulator stamps a frame before drawing it).
+  auto img_sub = nh.subscribe<sensor_msgs::Image>("endoscope/image_raw", 5, [&](sensor_msgs::Image::ConstPtr const& im) {
+    if (hidden && im->header.stamp.toSec() > hidden_from && first_hidden_image == 0.0) first_hidden_image = ros::WallTime::now().toSec();
   });
   double last_nonzero_rate = 0.0;
   auto cmd_sub = nh.subscribe<InstrumentVelocity>("arm_0/command", 50, [&](InstrumentVelocity::ConstPtr const& c) {
@@ -200,8 +219,9 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   EXPECT_GT(last_nonzero_rate, 0.0) << "the servo was not moving before the loss";
   std_srvs::SetBool occ;
   occ.request.data = true;
-  hidden = true;
   ASSERT_TRUE(ros::service::call("endoscope_simulator/occlude", occ));
+  hidden_from = ros::Time::now().toSec();
+  hidden = true;
   ros::WallDuration(1.0).sleep();
   ASSERT_GT(first_hidden_image, 0.0);
   ASSERT_GT(first_zero, 0.0) << "no zero command after the instruments vanished";
