@@ -56,7 +56,7 @@ class SegmentationNodelet : public nodelet::Nodelet {
   std::vector<Eigen::Vector3d> trocar_images_;
   std::vector<int> trocar_ids_;
   ros::Time last_stamp_;
-  std::string camera_info_key_;  // distortion and K of the last camera_info (rebuild the rectifier on change)
+  sensor_msgs::CameraInfo rectified_for_;  // the camera model rectify_ was built for
   std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectify_;
 };
 
@@ -193,13 +193,10 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
   std::vector<core::ApparentContour> contours = seg.contours;
   // Lens distortion: refit the lines to the rectified edge points.
   if (ros_io::hasDistortion(*info)) {
-    std::string key = info->distortion_model;
-    for (double d : info->D) key += " " + std::to_string(d);
-    for (double k : info->K) key += " " + std::to_string(k);
-    for (double p : info->P) key += " " + std::to_string(p);
-    if (key != camera_info_key_) {
+    if (!rectify_ || info->D != rectified_for_.D || info->K != rectified_for_.K || info->R != rectified_for_.R ||
+        info->P != rectified_for_.P) {
       rectify_ = ros_io::rectifier(*info);
-      camera_info_key_ = key;
+      rectified_for_ = *info;
     }
     std::vector<core::ApparentContour> rectified;
     for (std::size_t i = 0; i < contours.size(); ++i)
