@@ -29,7 +29,8 @@ Eigen::Matrix3d rectifiedK(sensor_msgs::CameraInfo const& info);
 /// True when D has a non-zero coefficient (the edge points must be rectified).
 bool hasDistortion(sensor_msgs::CameraInfo const& info);
 /// Distorted pixel -> pixel of the rectified camera (R, P of the camera_info), iterated to 1e-10
-/// px (OpenCV's default 5 iterations leave 0.02 px at the corners of a wide-angle endoscope).
+/// px (OpenCV's default 5 iterations leave 0.02 px at the corners of a wide-angle endoscope);
+/// tabulated at every pixel when built (build it once per camera model), interpolated per point.
 std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::CameraInfo const& info);
 
 bool toMsg(core::ApparentContour const& c, endo_guidance::ApparentContour& m);
