@@ -70,6 +70,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
   grower_.reset(filtered_, fov_);
+  bool have_gradient = false;
   double const max_area = params_.regions.max_area_fraction * fov_area_;
   for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
@@ -152,6 +153,31 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         break;
       }
       why = f.rejection;
+    }
+    // The region leaked or split at every level: search the shaft's sides from the seed directly
+    // in the feature's gradient (strip_search.h), once per seed.
+    if (!best && params_.strip.enabled) {
+      if (!have_gradient) {
+        cv::Sobel(filtered_, gx_, CV_16S, 1, 0, 3);
+        cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
+        have_gradient = true;
+      }
+      int const level = *std::max_element(T.begin(), T.end());
+      if (auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, level, scale, params_.strip, params_.contours)) {
+        ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
+        if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
+          f.contour.reset();
+          f.rejection = ContourRejection::kNotStraight;
+        }
+        if (f.contour) {
+          best = std::move(sc->region);
+          best_fit = std::move(f);
+          best_level = static_cast<int>(T.size()) - 1;
+          best_score = sc->score;
+        } else {
+          why = f.rejection;
+        }
+      }
     }
     if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0});
     else if (smallest) memory_now.push_back({seed.position, smallest_level, 0.0, false, why, 0});

@@ -11,6 +11,7 @@
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/region_growing.h"
 #include "endo_guidance/core/seed_search.h"
+#include "endo_guidance/core/strip_search.h"
 
 namespace endo_guidance::core {
 
@@ -27,6 +28,7 @@ struct SegmentationParams {
   SeedSearchParams seeds;
   RegionGrowingParams regions;
   ContourLinesParams contours;
+  StripSearchParams strip;
 };
 
 /// What one frame gave, with the intermediate results for overlays and diagnostics.
@@ -75,7 +77,7 @@ class InstrumentSegmenter {
   Memory const* remembered(cv::Point const& seed) const;
   RegionGrower grower_;
   std::vector<Memory> memory_;
-  cv::Mat small_, raw_, filtered_, labels_;
+  cv::Mat small_, raw_, filtered_, labels_, gx_, gy_;
 };
 
 /// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image

@@ -1,0 +1,57 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <optional>
+#include <vector>
+
+#include "endo_guidance/core/contour_lines.h"
+#include "endo_guidance/core/field_of_view.h"
+#include "endo_guidance/core/region_growing.h"
+#include "endo_guidance/core/seed_search.h"
+
+namespace endo_guidance::core {
+
+struct StripSearchParams {
+  bool enabled = true;            ///< search seeds whose grown regions gave no shaft (a leaked region)
+  double max_angle_deg = 75.0;    ///< sides searched within this angle of the inward normal at the seed
+  double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 6)
+  int start_slack_px = 2;         ///< border points: sides start on the seed's run or this far beyond its ends
+  int max_starts = 24;            ///< start points per side along the run (a long run is sampled)
+  double full_response = 40.0;    ///< Sobel units (feature): an edge this steep counts fully
+  double min_response = 0.35;     ///< fraction of full_response: a side continues while the edge is this strong on average
+  double min_side_px = 20.0;      ///< processing px: shortest side kept
+  double min_inside_low = 0.8;    ///< fraction of the strip between the sides that is shaft-like (at or below the level)
+  double min_length_ratio = 0.5; ///< the shorter side over the longer (both contours end at the tip)
+  double min_width_px = 5.0;     ///< processing px: narrowest strip at the entry
+  double max_inside_outside_ratio = 0.5;  ///< the strip's median feature over the tissue's beside each side
+  double min_end_width = 0.45;     ///< the strip's far width over its entry width (perspective narrows it; crossing sides do not)
+  int candidates_per_side = 8;    ///< best side hypotheses paired
+  double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
+};
+
+/// The sides of a shaft searched directly in the edge image from a border seed -- the fallback
+/// when region growing from the seed leaks into tissue of the same colour (grey membranes, the
+/// vignetted rim, smoke), which breaks the boundary's two classes. Each side starts at an end of
+/// the seed's border run and is the ray (angle about the inward normal) along which the feature
+/// gradient, signed from shaft to tissue, stays strong the longest: the best prefix of
+/// sum(min(g.n / g_full, 1) - min_response). Sides are paired by parallelism (contours of a
+/// cylinder meet at most max_angle apart), a shaft-like interior and no crossing. The result is
+/// a SideFit for refineContour() (full-resolution sub-pixel lines) and the strip as its region.
+/// `gx`, `gy`: CV_16S Sobel of `feature`; `level`: feature value at or below which the interior
+/// is shaft-like.
+struct StripCandidate {
+  SideFit sides;
+  Region region;
+  double score = 0.0;
+};
+std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
+                                          FieldOfView const& fov, Seed const& seed, int level, int scale,
+                                          StripSearchParams const& params, ContourLinesParams const& lines);
+
+/// Whether the sub-pixel contour found from a strip stayed on the strip: each line within
+/// max_refine_shift (processing px) of the side it was refined from, at both ends of that side.
+/// The wide sub-pixel pass can otherwise lock onto a neighbouring tissue edge.
+bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, int scale, StripSearchParams const& params);
+
+}  // namespace endo_guidance::core

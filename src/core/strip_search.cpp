@@ -1,0 +1,235 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/strip_search.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+
+namespace endo_guidance::core {
+
+namespace {
+
+struct Ray {
+  Eigen::Vector2d start, dir, out;  // start (processing px), unit direction, unit outward normal
+  double angle = 0.0;               // about the inward normal (rad)
+  double score = -1.0;              // best prefix of sum(response - min_response)
+  double length = 0.0;              // where that prefix ends (px)
+  int pos = 0;                      // start: border points from the run's first one
+};
+
+// Walks the ray and keeps the best prefix: the side continues while the edge, on average, is at
+// least min_response strong, and ends where it stops (jaws, tip, or the start of a leak).
+void walk(Ray& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
+  double const inv = 1.0 / p.full_response;
+  double acc = 0.0, best = 0.0, best_t = 0.0;
+  int const tmax = gx.cols + gx.rows;
+  for (int t = 1; t < tmax; ++t) {
+    Eigen::Vector2d const q = r.start + t * r.dir;
+    int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+    if (x < 0 || y < 0 || x >= gx.cols || y >= gx.rows) break;
+    if (t > 4 && fov.mask.at<std::uint8_t>(y, x) == 0) break;
+    double const g = gx.at<std::int16_t>(y, x) * r.out.x() + gy.at<std::int16_t>(y, x) * r.out.y();
+    acc += std::clamp(g * inv, -1.0, 1.0) - p.min_response;
+    if (acc > best) {
+      best = acc;
+      best_t = t;
+    } else if (acc < best - 8.0) {
+      break;  // the edge has clearly ended
+    }
+  }
+  r.score = best;
+  r.length = best_t;
+}
+
+Eigen::Vector2d rotate(Eigen::Vector2d const& v, double a) {
+  double const c = std::cos(a), s = std::sin(a);
+  return {c * v.x() - s * v.y(), s * v.x() + c * v.y()};
+}
+
+// The best rays of one side: starts within the slack of the run's end, a coarse angular sweep,
+// the best few (distinct in angle) refined.
+std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int k_from, int k_to, int k_step,
+                            Eigen::Vector2d const& inward, Eigen::Vector2d const& away, cv::Mat const& gx,
+                            cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
+  int const n = static_cast<int>(border.size());
+  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  auto make = [&](cv::Point const& s, double a, int pos) {
+    Ray r;
+    r.start = Eigen::Vector2d(s.x, s.y);
+    r.dir = rotate(inward, a);
+    r.out = Eigen::Vector2d(-r.dir.y(), r.dir.x());
+    if (r.out.dot(away) < 0.0) r.out = -r.out;
+    r.angle = a;
+    r.pos = pos;
+    walk(r, gx, gy, fov, p);
+    return r;
+  };
+  std::vector<Ray> coarse;
+  for (int k = k_from; k <= k_to; k += k_step) {
+    cv::Point const s = border[((first + k) % n + n) % n];
+    for (double a = -amax; a <= amax + 1e-9; a += step) coarse.push_back(make(s, a, k));
+  }
+  std::sort(coarse.begin(), coarse.end(), [](Ray const& a, Ray const& b) { return a.score > b.score; });
+  // The best few distinct hypotheses (another start or another angle).
+  std::vector<Ray> picked;
+  for (auto const& r : coarse) {
+    if (static_cast<int>(picked.size()) >= p.candidates_per_side || r.score <= 0.0) break;
+    bool distinct = true;
+    for (auto const& q : picked)
+      distinct = distinct && (std::abs(q.angle - r.angle) > 1.5 * step || std::abs(q.pos - r.pos) > 2 * k_step);
+    if (distinct) picked.push_back(r);
+  }
+  for (auto& r : picked) {
+    Ray best = r;
+    for (int k = r.pos - k_step / 2; k <= r.pos + k_step / 2; ++k) {
+      cv::Point const s = border[((first + k) % n + n) % n];
+      for (double a = r.angle - step; a <= r.angle + step + 1e-9; a += step / 6.0) {
+        Ray const q = make(s, a, k);
+        if (q.score > best.score) best = q;
+      }
+    }
+    r = best;
+  }
+  return picked;
+}
+
+}  // namespace
+
+std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
+                                          FieldOfView const& fov, Seed const& seed, int level, int scale,
+                                          StripSearchParams const& p, ContourLinesParams const& lp) {
+  CV_Assert(feature.type() == CV_8U && gx.type() == CV_16S && gy.type() == CV_16S && gx.size() == feature.size() &&
+            fov.mask.size() == feature.size());
+  auto const& B = fov.border;
+  int const n = static_cast<int>(B.size());
+  if (n < 8 || seed.width < 3) return std::nullopt;
+  int const ib = seed.begin, ie = ((seed.end - 1) % n + n) % n;
+  Eigen::Vector2d const pb(B[ib].x, B[ib].y), pe(B[ie].x, B[ie].y);
+  if ((pb - pe).norm() < 2.0) return std::nullopt;
+  // Inward normal at the seed: the gradient of the distance to the FOV edge, else toward the centre.
+  Eigen::Vector2d inward(fov.centre.x - seed.position.x, fov.centre.y - seed.position.y);
+  if (!fov.depth.empty()) {
+    int const x = std::clamp(seed.position.x, 3, fov.depth.cols - 4), y = std::clamp(seed.position.y, 3, fov.depth.rows - 4);
+    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
+                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
+    if (g.norm() > 1e-6) inward = g;
+  }
+  if (inward.norm() < 1e-9) return std::nullopt;
+  inward.normalize();
+  // Sides start anywhere on the run (plus the slack): a run can extend beyond the shaft along a
+  // dark rim. Side 0 has the shaft toward the run's end, side 1 toward its beginning.
+  int const len = seed.width;
+  int const k_step = std::max(1, len / p.max_starts);
+  std::vector<Ray> const side0 = searchSide(B, ib, -p.start_slack_px, len - 1, k_step, inward, pb - pe, gx, gy, fov, p);
+  std::vector<Ray> const side1 = searchSide(B, ib, 0, len - 1 + p.start_slack_px, k_step, inward, pe - pb, gx, gy, fov, p);
+  double const cos_max = std::cos(lp.max_angle_deg * M_PI / 180.0);
+  // Pair the sides: near-parallel, not crossing, the strip between them shaft-like.
+  Ray const* ba = nullptr;
+  Ray const* bb = nullptr;
+  double best = 0.0;
+  for (auto const& a : side0)
+    for (auto const& b : side1) {
+      if (b.pos - a.pos < p.min_width_px || a.length < p.min_side_px || b.length < p.min_side_px || a.dir.dot(b.dir) < cos_max)
+        continue;
+      if (a.score + b.score <= best) continue;
+      if (std::min(a.length, b.length) < p.min_length_ratio * std::max(a.length, b.length)) continue;
+      double const lmin = std::min(a.length, b.length);
+      double const w0 = (b.start - a.start).dot(-a.out);
+      double const w1 = (b.start + lmin * b.dir - a.start - lmin * a.dir).dot(-a.out);
+      if (w0 < p.min_width_px || w1 < p.min_end_width * w0) continue;  // too thin, crossing or pinched
+      int low = 0, all = 0;
+      for (double t = 1.0; t <= lmin; t += 2.0) {
+        Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;
+        for (double f : {0.25, 0.5, 0.75}) {
+          Eigen::Vector2d const q = qa + f * (qb - qa);
+          int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+          if (x < 0 || y < 0 || x >= feature.cols || y >= feature.rows) continue;
+          ++all;
+          low += feature.at<std::uint8_t>(y, x) <= level;
+        }
+      }
+      if (all == 0 || low < p.min_inside_low * all) continue;
+      // Contrast: the strip's median feature well below the tissue's just outside each side
+      // (a side against the FOV edge has no outside samples and is not tested).
+      {
+        std::vector<int> in, o0, o1;
+        for (double t = 1.0; t <= lmin; t += 2.0) {
+          Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;
+          double const d = std::max(3.0, 0.3 * (qb - qa).norm());
+          auto add = [&](Eigen::Vector2d const& q, std::vector<int>& v) {
+            int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+            if (x >= 0 && y >= 0 && x < feature.cols && y < feature.rows && fov.mask.at<std::uint8_t>(y, x))
+              v.push_back(feature.at<std::uint8_t>(y, x));
+          };
+          for (double f : {0.25, 0.5, 0.75}) add(qa + f * (qb - qa), in);
+          add(qa + d * a.out, o0);
+          add(qb + d * b.out, o1);
+        }
+        auto median = [](std::vector<int>& v) {
+          std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+          return static_cast<double>(v[v.size() / 2]);
+        };
+        if (in.empty()) continue;
+        double const mi = median(in);
+        bool contrast = true;
+        for (auto* o : {&o0, &o1})
+          if (o->size() >= 4) contrast = contrast && mi <= p.max_inside_outside_ratio * median(*o);
+        if (!contrast) continue;
+      }
+      best = a.score + b.score;
+      ba = &a;
+      bb = &b;
+    }
+  if (!ba) return std::nullopt;
+  StripCandidate out;
+  out.score = best;
+  double const off = 0.5 * (scale - 1);
+  auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
+  SideFit& sf = out.sides;
+  Ray const* rays[2] = {ba, bb};
+  for (int s = 0; s < 2; ++s) {
+    Ray const& r = *rays[s];
+    for (double t = 1.0; t <= r.length; t += 1.0) sf.points[s].push_back(toFull(r.start + t * r.dir));
+    Eigen::Vector2d const nrm = -r.out;  // toward the shaft
+    Eigen::Vector2d const p0 = toFull(r.start);
+    sf.lines[s] = Eigen::Vector3d(nrm.x(), nrm.y(), -nrm.dot(p0));
+    sf.inliers += static_cast<int>(sf.points[s].size());
+  }
+  sf.entry = toFull(Eigen::Vector2d(seed.position.x, seed.position.y));
+  double fd = -1.0;
+  for (int s = 0; s < 2; ++s)
+    for (auto const& q : sf.points[s])
+      if ((q - sf.entry).norm() > fd) {
+        fd = (q - sf.entry).norm();
+        sf.far = q;
+      }
+  Region& rg = out.region;
+  rg.seed = seed.position;
+  rg.threshold = level;
+  auto pt = [](Eigen::Vector2d const& q) { return cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))); };
+  rg.boundary = {pt(ba->start), pt(ba->start + ba->length * ba->dir), pt(bb->start + bb->length * bb->dir), pt(bb->start)};
+  rg.box = cv::boundingRect(rg.boundary);
+  rg.area = static_cast<int>(std::lround(cv::contourArea(rg.boundary)));
+  return out;
+}
+
+bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, int scale, StripSearchParams const& p) {
+  double const tol = p.max_refine_shift * scale;
+  for (int s = 0; s < 2; ++s) {
+    auto const& pts = strip.sides.points[s];
+    if (pts.empty()) return false;
+    // The contour's lines are reordered (left/right): compare with the nearer one.
+    double best = std::numeric_limits<double>::infinity();
+    for (auto const& l : contour.lines) {
+      double worst = 0.0;
+      for (Eigen::Vector2d const& q : {pts.front(), pts.back()})
+        worst = std::max(worst, std::abs(l.head<2>().dot(q) + l.z()));
+      best = std::min(best, worst);
+    }
+    if (best > tol) return false;
+  }
+  return true;
+}
+
+}  // namespace endo_guidance::core
