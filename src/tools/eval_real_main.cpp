@@ -130,7 +130,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       bd = shafts[best] & ~er;
       Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
       double const len = (c.tip_px - c.entry_px).norm();
-      std::vector<double> d;
+      std::vector<double> d, signed_d;
       for (int y = 2; y < bd.rows - 2; ++y)
         for (int x = 2; x < bd.cols - 2; ++x) {
           if (!bd.at<std::uint8_t>(y, x)) continue;
@@ -138,12 +138,18 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
           double const t = ax.dot(q - c.entry_px);
           if (t < 0.05 * len || t > 0.95 * len) continue;
           Eigen::Vector3d const h(x, y, 1.0);
-          double const e = std::min(std::abs(c.lines[0].dot(h)), std::abs(c.lines[1].dot(h)));
+          double const e0 = c.lines[0].dot(h), e1 = c.lines[1].dot(h);
+          double const e = std::min(std::abs(e0), std::abs(e1));
           if (e > 25.0) continue;  // not this shaft's side (jaws, the other end)
           d.push_back(e);
+          signed_d.push_back(std::abs(e0) < std::abs(e1) ? e0 : e1);
         }
       if (!d.empty()) {
         st.line_median_px.push_back(percentile(d, 0.5));
+        if (verbose)
+          std::printf("  hit %s/%s id %d: line to mask boundary median %.2f px (signed, + = mask inside the lines: %.2f), residual %.2f px\n",
+                      f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
+                      percentile(signed_d, 0.5), c.residual_px);
         st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
       }
     }
