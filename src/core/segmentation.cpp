@@ -100,11 +100,44 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1});
       continue;
     }
-    std::vector<int> levels;
-    if (mem && mem->accepted) {
+    std::optional<Region> best;
+    ContourFit best_fit;
+    int best_level = -1;
+    double best_score = 0.0;
+    std::optional<StripCandidate> best_strip;
+    ContourRejection why = ContourRejection::kTooFewPoints;
+    // The strip search (strip_search.h): the sides searched from the seed in the gradient.
+    auto tryStrip = [&](StripCandidate const* previous) {
+      if (!have_gradient) {
+        cv::Sobel(filtered_, gx_, CV_16S, 1, 0, 3);
+        cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
+        have_gradient = true;
+      }
+      int const level = *std::max_element(T.begin(), T.end());
+      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, level, scale, params_.strip, params_.contours, previous);
+      if (!sc) return;
+      ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
+      if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
+        f.contour.reset();
+        f.rejection = ContourRejection::kNotStraight;
+      }
+      if (!f.contour) {
+        why = f.rejection;
+        return;
+      }
+      best = sc->region;
+      best_fit = std::move(f);
+      best_level = static_cast<int>(T.size()) - 1;
+      best_score = sc->score;
+      best_strip = std::move(sc);
+    };
+    // A shaft found by the strip search in the last frame: searched about its sides first.
+    if (mem && mem->accepted && mem->strip && params_.strip.enabled) tryStrip(&*mem->strip);
+    std::vector<int> levels;  // none when the tracked strip was found again
+    if (!best && mem && mem->accepted) {
       for (int d : {0, -1, 1})
         if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) levels.push_back(mem->level + d);
-    } else {
+    } else if (!best) {
       for (int i = 0; i < static_cast<int>(T.size()); ++i) levels.push_back(i);
     }
     struct Candidate {
@@ -116,7 +149,6 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     std::vector<Candidate> cands;
     std::optional<Region> smallest;
     int smallest_level = 0;
-    ContourRejection why = ContourRejection::kTooFewPoints;
     for (int li : levels) {
       auto r = grower_.grow(seed.position, T[li], si);
       if (!r) continue;
@@ -139,10 +171,6 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       if (mem && mem->accepted && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
     }
     std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
-    std::optional<Region> best;
-    ContourFit best_fit;
-    int best_level = -1;
-    double best_score = 0.0;
     for (auto& cd : cands) {
       ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
       if (f.contour) {
@@ -156,30 +184,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
     // The region leaked or split at every level: search the shaft's sides from the seed directly
     // in the feature's gradient (strip_search.h), once per seed.
-    if (!best && params_.strip.enabled) {
-      if (!have_gradient) {
-        cv::Sobel(filtered_, gx_, CV_16S, 1, 0, 3);
-        cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
-        have_gradient = true;
-      }
-      int const level = *std::max_element(T.begin(), T.end());
-      if (auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, level, scale, params_.strip, params_.contours)) {
-        ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
-        if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
-          f.contour.reset();
-          f.rejection = ContourRejection::kNotStraight;
-        }
-        if (f.contour) {
-          best = std::move(sc->region);
-          best_fit = std::move(f);
-          best_level = static_cast<int>(T.size()) - 1;
-          best_score = sc->score;
-        } else {
-          why = f.rejection;
-        }
-      }
-    }
-    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0});
+    if (!best && params_.strip.enabled) tryStrip(nullptr);
+    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, best_strip});
     else if (smallest) memory_now.push_back({seed.position, smallest_level, 0.0, false, why, 0});
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;

@@ -2,6 +2,7 @@
 #include "endo_guidance/core/strip_search.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -21,20 +22,25 @@ struct Ray {
 // Walks the ray and keeps the best prefix: the side continues while the edge, on average, is at
 // least min_response strong, and ends where it stops (jaws, tip, or the start of a leak).
 void walk(Ray& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
-  double const inv = 1.0 / p.full_response;
-  double acc = 0.0, best = 0.0, best_t = 0.0;
+  float const ox = static_cast<float>(r.out.x() / p.full_response), oy = static_cast<float>(r.out.y() / p.full_response);
+  float const dx = static_cast<float>(r.dir.x()), dy = static_cast<float>(r.dir.y()), tau = static_cast<float>(p.min_response);
+  float x = static_cast<float>(r.start.x()) + 0.5f, y = static_cast<float>(r.start.y()) + 0.5f;  // +0.5: truncation rounds
+  float const W = static_cast<float>(gx.cols), H = static_cast<float>(gx.rows);
+  float acc = 0.f, best = 0.f;
+  int best_t = 0;
   int const tmax = gx.cols + gx.rows;
   for (int t = 1; t < tmax; ++t) {
-    Eigen::Vector2d const q = r.start + t * r.dir;
-    int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-    if (x < 0 || y < 0 || x >= gx.cols || y >= gx.rows) break;
-    if (t > 4 && fov.mask.at<std::uint8_t>(y, x) == 0) break;
-    double const g = gx.at<std::int16_t>(y, x) * r.out.x() + gy.at<std::int16_t>(y, x) * r.out.y();
-    acc += std::clamp(g * inv, -1.0, 1.0) - p.min_response;
+    x += dx;
+    y += dy;
+    if (!(x >= 0.f && y >= 0.f && x < W && y < H)) break;
+    int const xi = static_cast<int>(x), yi = static_cast<int>(y);
+    if (t > 4 && fov.mask.ptr<std::uint8_t>(yi)[xi] == 0) break;
+    float const g = gx.ptr<std::int16_t>(yi)[xi] * ox + gy.ptr<std::int16_t>(yi)[xi] * oy;
+    acc += std::clamp(g, -1.f, 1.f) - tau;
     if (acc > best) {
       best = acc;
       best_t = t;
-    } else if (acc < best - 8.0) {
+    } else if (acc < best - 8.f) {
       break;  // the edge has clearly ended
     }
   }
@@ -50,10 +56,10 @@ Eigen::Vector2d rotate(Eigen::Vector2d const& v, double a) {
 // The best rays of one side: starts within the slack of the run's end, a coarse angular sweep,
 // the best few (distinct in angle) refined.
 std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int k_from, int k_to, int k_step,
-                            Eigen::Vector2d const& inward, Eigen::Vector2d const& away, cv::Mat const& gx,
+                            double a_lo, double a_hi, int candidates, Eigen::Vector2d const& inward, Eigen::Vector2d const& away, cv::Mat const& gx,
                             cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
   int const n = static_cast<int>(border.size());
-  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  double const step = p.coarse_step_deg * M_PI / 180.0;
   auto make = [&](cv::Point const& s, double a, int pos) {
     Ray r;
     r.start = Eigen::Vector2d(s.x, s.y);
@@ -68,13 +74,13 @@ std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int
   std::vector<Ray> coarse;
   for (int k = k_from; k <= k_to; k += k_step) {
     cv::Point const s = border[((first + k) % n + n) % n];
-    for (double a = -amax; a <= amax + 1e-9; a += step) coarse.push_back(make(s, a, k));
+    for (double a = a_lo; a <= a_hi + 1e-9; a += step) coarse.push_back(make(s, a, k));
   }
   std::sort(coarse.begin(), coarse.end(), [](Ray const& a, Ray const& b) { return a.score > b.score; });
   // The best few distinct hypotheses (another start or another angle).
   std::vector<Ray> picked;
   for (auto const& r : coarse) {
-    if (static_cast<int>(picked.size()) >= p.candidates_per_side || r.score <= 0.0) break;
+    if (static_cast<int>(picked.size()) >= candidates || r.score <= 0.0) break;
     bool distinct = true;
     for (auto const& q : picked)
       distinct = distinct && (std::abs(q.angle - r.angle) > 1.5 * step || std::abs(q.pos - r.pos) > 2 * k_step);
@@ -84,7 +90,7 @@ std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int
     Ray best = r;
     for (int k = r.pos - k_step / 2; k <= r.pos + k_step / 2; ++k) {
       cv::Point const s = border[((first + k) % n + n) % n];
-      for (double a = r.angle - step; a <= r.angle + step + 1e-9; a += step / 6.0) {
+      for (double a = r.angle - step; a <= r.angle + step + 1e-9; a += step / 3.0) {
         Ray const q = make(s, a, k);
         if (q.score > best.score) best = q;
       }
@@ -98,7 +104,8 @@ std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int
 
 std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
                                           FieldOfView const& fov, Seed const& seed, int level, int scale,
-                                          StripSearchParams const& p, ContourLinesParams const& lp) {
+                                          StripSearchParams const& p, ContourLinesParams const& lp,
+                                          StripCandidate const* previous) {
   CV_Assert(feature.type() == CV_8U && gx.type() == CV_16S && gy.type() == CV_16S && gx.size() == feature.size() &&
             fov.mask.size() == feature.size());
   auto const& B = fov.border;
@@ -118,11 +125,46 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
   if (inward.norm() < 1e-9) return std::nullopt;
   inward.normalize();
   // Sides start anywhere on the run (plus the slack): a run can extend beyond the shaft along a
-  // dark rim. Side 0 has the shaft toward the run's end, side 1 toward its beginning.
+  // dark rim. Side 0 has the shaft toward the run's end, side 1 toward its beginning. With the
+  // strip of the previous frame, each side is searched only about where it was.
   int const len = seed.width;
-  int const k_step = std::max(1, len / p.max_starts);
-  std::vector<Ray> const side0 = searchSide(B, ib, -p.start_slack_px, len - 1, k_step, inward, pb - pe, gx, gy, fov, p);
-  std::vector<Ray> const side1 = searchSide(B, ib, 0, len - 1 + p.start_slack_px, k_step, inward, pe - pb, gx, gy, fov, p);
+  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  std::array<int, 2> k_from{-p.start_slack_px, 0}, k_to{len - 1, len - 1 + p.start_slack_px};
+  std::array<double, 2> a_lo{-amax, -amax}, a_hi{amax, amax};
+  int k_step = std::max(1, len / p.max_starts);
+  int candidates = p.candidates_per_side;
+  if (previous) {
+    std::array<int, 2> kk{};
+    bool near = true;
+    for (int s = 0; s < 2 && near; ++s) {
+      double bd = 1e300;
+      for (int k = k_from[s]; k <= k_to[s]; ++k) {
+        cv::Point const q = B[((ib + k) % n + n) % n];
+        double const d = (Eigen::Vector2d(q.x, q.y) - previous->start[s]).squaredNorm();
+        if (d < bd) {
+          bd = d;
+          kk[s] = k;
+        }
+      }
+      near = bd <= p.track_px * p.track_px;
+    }
+    if (near) {
+      k_step = 1;
+      candidates = 2;
+      for (int s = 0; s < 2; ++s) {
+        Eigen::Vector2d const d = previous->dir[s];
+        double const a = std::atan2(inward.x() * d.y() - inward.y() * d.x(), inward.dot(d));
+        k_from[s] = kk[s] - p.track_px / 2;
+        k_to[s] = kk[s] + p.track_px / 2;
+        a_lo[s] = std::max(-amax, a - 2.0 * step);
+        a_hi[s] = std::min(amax, a + 2.0 * step);
+      }
+    }
+  }
+  std::vector<Ray> const side0 =
+      searchSide(B, ib, k_from[0], k_to[0], k_step, a_lo[0], a_hi[0], candidates, inward, pb - pe, gx, gy, fov, p);
+  std::vector<Ray> const side1 =
+      searchSide(B, ib, k_from[1], k_to[1], k_step, a_lo[1], a_hi[1], candidates, inward, pe - pb, gx, gy, fov, p);
   double const cos_max = std::cos(lp.max_angle_deg * M_PI / 180.0);
   // Pair the sides: near-parallel, not crossing, the strip between them shaft-like.
   Ray const* ba = nullptr;
@@ -190,6 +232,8 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
   Ray const* rays[2] = {ba, bb};
   for (int s = 0; s < 2; ++s) {
     Ray const& r = *rays[s];
+    out.start[s] = r.start;
+    out.dir[s] = r.dir;
     for (double t = 1.0; t <= r.length; t += 1.0) sf.points[s].push_back(toFull(r.start + t * r.dir));
     Eigen::Vector2d const nrm = -r.out;  // toward the shaft
     Eigen::Vector2d const p0 = toFull(r.start);

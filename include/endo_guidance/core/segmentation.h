@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <vector>
 
 #include "endo_guidance/core/apparent_contour.h"
@@ -73,6 +74,7 @@ class InstrumentSegmenter {
     bool accepted = false;
     ContourRejection why = ContourRejection::kNone;
     int age = 0;            // frames since its last full search
+    std::optional<StripCandidate> strip;  // the strip it was found as (strip search), if so
   };
   Memory const* remembered(cv::Point const& seed) const;
   RegionGrower grower_;

@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #pragma once
 
+#include <Eigen/Core>
+#include <array>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <vector>
@@ -15,8 +17,9 @@ namespace endo_guidance::core {
 struct StripSearchParams {
   bool enabled = true;            ///< search seeds whose grown regions gave no shaft (a leaked region)
   double max_angle_deg = 75.0;    ///< sides searched within this angle of the inward normal at the seed
-  double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 6)
+  double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 3)
   int start_slack_px = 2;         ///< border points: sides start on the seed's run or this far beyond its ends
+  int track_px = 6;               ///< processing px: with last frame's strip, sides start this close to its sides
   int max_starts = 24;            ///< start points per side along the run (a long run is sampled)
   double full_response = 40.0;    ///< Sobel units (feature): an edge this steep counts fully
   double min_response = 0.35;     ///< fraction of full_response: a side continues while the edge is this strong on average
@@ -39,15 +42,17 @@ struct StripSearchParams {
 /// cylinder meet at most max_angle apart), a shaft-like interior and no crossing. The result is
 /// a SideFit for refineContour() (full-resolution sub-pixel lines) and the strip as its region.
 /// `gx`, `gy`: CV_16S Sobel of `feature`; `level`: feature value at or below which the interior
-/// is shaft-like.
+/// is shaft-like. `previous`: this shaft's strip in the last frame (video), searched about only.
 struct StripCandidate {
   SideFit sides;
   Region region;
   double score = 0.0;
+  std::array<Eigen::Vector2d, 2> start, dir;  ///< the two sides' rays (processing px)
 };
 std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
                                           FieldOfView const& fov, Seed const& seed, int level, int scale,
-                                          StripSearchParams const& params, ContourLinesParams const& lines);
+                                          StripSearchParams const& params, ContourLinesParams const& lines,
+                                          StripCandidate const* previous = nullptr);
 
 /// Whether the sub-pixel contour found from a strip stayed on the strip: each line within
 /// max_refine_shift (processing px) of the side it was refined from, at both ends of that side.
