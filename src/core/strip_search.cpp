@@ -180,6 +180,7 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
       double const w0 = (b.start - a.start).dot(-a.out);
       double const w1 = (b.start + lmin * b.dir - a.start - lmin * a.dir).dot(-a.out);
       if (w0 < p.min_width_px || w1 < p.min_end_width * w0) continue;  // too thin, crossing or pinched
+      if (lmin < w0) continue;  // a blob's rim, not a shaft (refineContour checks the elongation of the refined lines)
       int low = 0, all = 0;
       for (double t = 1.0; t <= lmin; t += 2.0) {
         Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;

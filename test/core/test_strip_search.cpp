@@ -1,0 +1,197 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// The strip search (sides of a shaft searched from a border seed in the feature gradient), on
+// drawn feature images with exact sides, and inside the segmentation on a shaft whose grown
+// region leaks into a grey membrane along the border.
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "endo_guidance/core/segmentation.h"
+#include "endo_guidance/core/strip_search.h"
+
+using namespace endo_guidance::core;
+
+namespace {
+
+// Distance of the line l (full-res, normalised) to the point q.
+double dist(Eigen::Vector3d const& l, Eigen::Vector2d const& q) { return std::abs(l.head<2>().dot(q) + l.z()); }
+
+struct Drawn {
+  cv::Mat feature, gx, gy;
+  FieldOfView fov;
+  std::vector<Seed> seeds;
+};
+
+// A 320x240 feature image: tissue at 120, the polygon at 10, lightly blurred (as the Sigma
+// filter leaves an edge); the full rectangle as the field of view.
+Drawn draw(std::vector<cv::Point2d> const& poly) {
+  Drawn d;
+  d.feature = cv::Mat(240, 320, CV_8U, cv::Scalar(120));
+  std::vector<cv::Point> p;
+  for (auto const& q : poly) p.emplace_back(static_cast<int>(std::lround(q.x * 16)), static_cast<int>(std::lround(q.y * 16)));
+  if (!p.empty()) cv::fillPoly(d.feature, std::vector<std::vector<cv::Point>>{p}, cv::Scalar(10), cv::LINE_AA, 4);
+  cv::GaussianBlur(d.feature, d.feature, cv::Size(3, 3), 0.7);
+  d.fov = detectFieldOfView(cv::Mat(240, 320, CV_8UC3, cv::Scalar(60, 80, 190)));
+  cv::Sobel(d.feature, d.gx, CV_16S, 1, 0, 3);
+  cv::Sobel(d.feature, d.gy, CV_16S, 0, 1, 3);
+  d.seeds = findSeeds(d.feature, d.fov);
+  return d;
+}
+
+// Lines through two points.
+Eigen::Vector3d lineThrough(cv::Point2d a, cv::Point2d b) {
+  Eigen::Vector3d l = Eigen::Vector3d(a.x, a.y, 1).cross(Eigen::Vector3d(b.x, b.y, 1));
+  return l / l.head<2>().norm();
+}
+
+// Fills a polygon (pixel centres at integer coordinates) with exact area coverage: drawn 8x
+// supersampled (supersampled pixel J covers [J/8 - 1/2, (J+1)/8 - 1/2)) and box-averaged.
+void fillExact(cv::Mat& img, std::vector<cv::Point2d> const& poly, cv::Scalar const& colour) {
+  int const f = 8;
+  cv::Mat big = cv::Mat::zeros(img.rows * f, img.cols * f, CV_8U);
+  std::vector<cv::Point> p;
+  for (auto const& q : poly)
+    p.emplace_back(static_cast<int>(std::lround((f * (q.x + 0.5) - 0.5) * 16)), static_cast<int>(std::lround((f * (q.y + 0.5) - 0.5) * 16)));
+  cv::fillPoly(big, std::vector<std::vector<cv::Point>>{p}, cv::Scalar(255), cv::LINE_8, 4);
+  cv::Mat cover;
+  cv::resize(big, cover, img.size(), 0, 0, cv::INTER_AREA);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      double const a = cover.at<std::uint8_t>(y, x) / 255.0;
+      auto& px = img.at<cv::Vec3b>(y, x);
+      for (int k = 0; k < 3; ++k) px[k] = cv::saturate_cast<std::uint8_t>((1 - a) * px[k] + a * colour[k]);
+    }
+}
+
+}  // namespace
+
+TEST(StripSearch, FindsTheSidesOfAStripFromItsSeed) {
+  // A shaft entering across the left border, narrowing slightly (perspective).
+  cv::Point2d const a0(0, 100), a1(250, 140), b1(250, 162), b0(0, 128);
+  Drawn const d = draw({a0, a1, b1, b0});
+  ASSERT_EQ(d.seeds.size(), 1u);
+  StripSearchParams const p;
+  auto const sc = searchStrip(d.feature, d.gx, d.gy, d.fov, d.seeds[0], 60, 1, p, ContourLinesParams{});
+  ASSERT_TRUE(sc.has_value());
+  Eigen::Vector3d const la = lineThrough(a0, a1), lb = lineThrough(b0, b1);
+  // Each side's sampled points within 1.5 px of one true side (the search is at whole pixels).
+  for (int s = 0; s < 2; ++s) {
+    auto const& pts = sc->sides.points[s];
+    ASSERT_GT(pts.size(), 150u) << "side " << s << " too short";
+    double worst_a = 0, worst_b = 0;
+    for (auto const& q : pts) {
+      worst_a = std::max(worst_a, dist(la, q));
+      worst_b = std::max(worst_b, dist(lb, q));
+    }
+    EXPECT_LT(std::min(worst_a, worst_b), 1.5) << "side " << s;
+  }
+  // Lines oriented with the shaft on their positive side.
+  Eigen::Vector3d const mid(125, 132, 1);
+  EXPECT_GT(sc->sides.lines[0].dot(mid), 0.0);
+  EXPECT_GT(sc->sides.lines[1].dot(mid), 0.0);
+
+  // Tracked: searched only about the previous sides, the same strip again.
+  auto const tr = searchStrip(d.feature, d.gx, d.gy, d.fov, d.seeds[0], 60, 1, p, ContourLinesParams{}, &*sc);
+  ASSERT_TRUE(tr.has_value());
+  for (int s = 0; s < 2; ++s) {
+    EXPECT_LT((tr->start[s] - sc->start[s]).norm(), 1.01);
+    EXPECT_GT(tr->dir[s].dot(sc->dir[s]), std::cos(1.5 * M_PI / 180.0));
+  }
+}
+
+void show(std::optional<StripCandidate> const& c) {
+  if (!c) return;
+  for (int s = 0; s < 2; ++s)
+    std::printf("side %d: (%.1f %.1f) -> (%.1f %.1f)\n", s, c->sides.points[s].front().x(), c->sides.points[s].front().y(),
+                c->sides.points[s].back().x(), c->sides.points[s].back().y());
+}
+
+TEST(StripSearch, RejectsWedgesBlobsAndWeakStrips) {
+  StripSearchParams const p;
+  ContourLinesParams const lp;
+  // Sides 40 degrees apart: not the contours of a cylinder.
+  {
+    Drawn const d = draw({{0, 60}, {200, 120}, {0, 200}});
+    ASSERT_FALSE(d.seeds.empty());
+    for (auto const& s : d.seeds) { auto c = searchStrip(d.feature, d.gx, d.gy, d.fov, s, 60, 1, p, lp); show(c); EXPECT_FALSE(c) << "wedge"; }
+  }
+  // A round blob on the border (a gauze, a pool): no two long straight sides.
+  {
+    Drawn d = draw({});
+    cv::circle(d.feature, {0, 120}, 50, cv::Scalar(10), cv::FILLED, cv::LINE_AA);
+    cv::Sobel(d.feature, d.gx, CV_16S, 1, 0, 3);
+    cv::Sobel(d.feature, d.gy, CV_16S, 0, 1, 3);
+    d.seeds = findSeeds(d.feature, d.fov);
+    ASSERT_FALSE(d.seeds.empty());
+    for (auto const& s : d.seeds) { auto c = searchStrip(d.feature, d.gx, d.gy, d.fov, s, 60, 1, p, lp); show(c); EXPECT_FALSE(c) << "blob"; }
+  }
+  // A strip barely darker than the tissue beside it (a fold, a shadow): no contrast.
+  {
+    Drawn d = draw({});
+    std::vector<cv::Point> q{{0, 100 * 16}, {250 * 16, 140 * 16}, {250 * 16, 162 * 16}, {0, 128 * 16}};
+    cv::fillPoly(d.feature, std::vector<std::vector<cv::Point>>{q}, cv::Scalar(70), cv::LINE_AA, 4);
+    cv::Sobel(d.feature, d.gx, CV_16S, 1, 0, 3);
+    cv::Sobel(d.feature, d.gy, CV_16S, 0, 1, 3);
+    d.seeds = findSeeds(d.feature, d.fov, SeedSearchParams{75});
+    ASSERT_FALSE(d.seeds.empty());
+    for (auto const& s : d.seeds) EXPECT_FALSE(searchStrip(d.feature, d.gx, d.gy, d.fov, s, 80, 1, p, lp)) << "low contrast";
+    // The same strip at full contrast is found (the case above fails for its contrast only).
+    cv::fillPoly(d.feature, std::vector<std::vector<cv::Point>>{q}, cv::Scalar(10), cv::LINE_AA, 4);
+    cv::Sobel(d.feature, d.gx, CV_16S, 1, 0, 3);
+    cv::Sobel(d.feature, d.gy, CV_16S, 0, 1, 3);
+    EXPECT_TRUE(searchStrip(d.feature, d.gx, d.gy, d.fov, d.seeds[0], 80, 1, p, lp));
+  }
+}
+
+TEST(StripSearch, BadInput) {
+  Drawn const d = draw({{0, 100}, {250, 140}, {250, 162}, {0, 128}});
+  ASSERT_FALSE(d.seeds.empty());
+  cv::Mat gxf;
+  d.gx.convertTo(gxf, CV_32F);
+  EXPECT_THROW(searchStrip(d.feature, gxf, d.gy, d.fov, d.seeds[0], 60, 1, {}, {}), cv::Exception);
+  Seed tiny = d.seeds[0];
+  tiny.width = 2;
+  EXPECT_FALSE(searchStrip(d.feature, d.gx, d.gy, d.fov, tiny, 60, 1, {}, {}));
+  FieldOfView empty = d.fov;
+  empty.border.clear();
+  EXPECT_FALSE(searchStrip(d.feature, d.gx, d.gy, empty, d.seeds[0], 60, 1, {}, {}));
+}
+
+// In the segmentation: a grey shaft whose grown region runs into a grey membrane lying along the
+// border below it. Without the strip search the shaft is lost; with it, the contour lines are
+// sub-pixel.
+TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
+  cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
+  cv::Mat noise(img.size(), CV_8UC3);
+  cv::randn(noise, 0, 3);
+  img += noise;
+  // The membrane: pale and grey, along the left border, touching the shaft's lower side.
+  cv::rectangle(img, cv::Rect(0, 255, 160, 225), cv::Scalar(150, 150, 158), cv::FILLED);
+  cv::Point2d const a0(-5, 200), a1(450, 290), b1(450, 334), b0(-5, 258);
+  fillExact(img, {a0, a1, b1, b0}, cv::Scalar(118, 118, 122));
+  cv::GaussianBlur(img, img, cv::Size(5, 5), 1.0);  // symmetric: the edges stay where they are
+  Eigen::Vector3d const la = lineThrough(a0, a1), lb = lineThrough(b0, b1);
+  auto onShaft = [&](ApparentContour const& c) {
+    double worst = 0.0;
+    for (auto const& l : c.lines)
+      for (double x : {60.0, 250.0, 400.0}) {
+        // The contour line at x, compared with the nearer true side there.
+        double const y = -(l.x() * x + l.z()) / l.y();
+        worst = std::max(worst, std::min(dist(la, {x, y}), dist(lb, {x, y})));
+      }
+    return worst;
+  };
+  SegmentationParams sp;
+  sp.strip.enabled = false;
+  InstrumentSegmenter without(sp);
+  auto const r0 = without.process(img);
+  for (auto const& c : r0.contours) EXPECT_GT(onShaft(c), 0.5) << "found without the strip search: the test scene does not leak";
+  InstrumentSegmenter with;
+  auto const r1 = with.process(img);
+  ASSERT_EQ(r1.contours.size(), 1u);
+  EXPECT_LT(onShaft(r1.contours[0]), 0.5);
+  // Video: the next frame tracks the strip and finds it again.
+  auto const r2 = with.process(img);
+  ASSERT_EQ(r2.contours.size(), 1u);
+  EXPECT_LT(onShaft(r2.contours[0]), 0.5);
+}
