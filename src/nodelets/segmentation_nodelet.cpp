@@ -93,6 +93,8 @@ void SegmentationNodelet::onInit() {
   c.min_edge_contrast = S.contours.min_edge_contrast;
   c.min_fill = S.contours.min_fill;
   c.min_elongation = S.contours.min_elongation;
+  c.strip_search = S.strip.enabled;
+  c.strip_max_inside_outside_ratio = S.strip.max_inside_outside_ratio;
   c.max_regions = S.regions.max_regions;
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](SegmentationConfig& cfg, uint32_t level) { configCb(cfg, level); });
@@ -143,6 +145,8 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.contours.min_edge_contrast = c.min_edge_contrast;
   S.contours.min_fill = c.min_fill;
   S.contours.min_elongation = c.min_elongation;
+  S.strip.enabled = c.strip_search;
+  S.strip.max_inside_outside_ratio = c.strip_max_inside_outside_ratio;
   S.regions.max_regions = c.max_regions;
   segmenter_.setParams(S);
 }

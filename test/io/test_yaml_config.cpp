@@ -59,4 +59,14 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.seeds.relative_threshold, defaults.segmentation.seeds.relative_threshold);
   EXPECT_EQ(shipped.segmentation.seeds.dark_border_level, defaults.segmentation.seeds.dark_border_level);
   EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
+  EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
+  EXPECT_EQ(shipped.segmentation.strip.max_angle_deg, defaults.segmentation.strip.max_angle_deg);
+  EXPECT_EQ(shipped.segmentation.strip.min_response, defaults.segmentation.strip.min_response);
+  EXPECT_EQ(shipped.segmentation.strip.min_inside_low, defaults.segmentation.strip.min_inside_low);
+  EXPECT_EQ(shipped.segmentation.strip.max_inside_outside_ratio, defaults.segmentation.strip.max_inside_outside_ratio);
+  EXPECT_EQ(shipped.segmentation.strip.min_length_ratio, defaults.segmentation.strip.min_length_ratio);
+  PipelineParams off;
+  io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n"), off);
+  EXPECT_FALSE(off.segmentation.strip.enabled);
+  EXPECT_EQ(off.segmentation.strip.min_length_ratio, 0.7);
 }
