@@ -100,81 +100,21 @@ std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int
   return picked;
 }
 
-}  // namespace
-
-std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
-                                          FieldOfView const& fov, Seed const& seed, int level, int scale,
-                                          StripSearchParams const& p, ContourLinesParams const& lp,
-                                          StripCandidate const* previous) {
-  CV_Assert(feature.type() == CV_8U && gx.type() == CV_16S && gy.type() == CV_16S && gx.size() == feature.size() &&
-            fov.mask.size() == feature.size());
-  auto const& B = fov.border;
-  int const n = static_cast<int>(B.size());
-  if (n < 8 || seed.width < 3) return std::nullopt;
-  int const ib = seed.begin, ie = ((seed.end - 1) % n + n) % n;
-  Eigen::Vector2d const pb(B[ib].x, B[ib].y), pe(B[ie].x, B[ie].y);
-  if ((pb - pe).norm() < 2.0) return std::nullopt;
-  // Inward normal at the seed: the gradient of the distance to the FOV edge, else toward the centre.
-  Eigen::Vector2d inward(fov.centre.x - seed.position.x, fov.centre.y - seed.position.y);
-  if (!fov.depth.empty()) {
-    int const x = std::clamp(seed.position.x, 3, fov.depth.cols - 4), y = std::clamp(seed.position.y, 3, fov.depth.rows - 4);
-    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
-                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
-    if (g.norm() > 1e-6) inward = g;
-  }
-  if (inward.norm() < 1e-9) return std::nullopt;
-  inward.normalize();
-  // Sides start anywhere on the run (plus the slack): a run can extend beyond the shaft along a
-  // dark rim. Side 0 has the shaft toward the run's end, side 1 toward its beginning. With the
-  // strip of the previous frame, each side is searched only about where it was.
-  int const len = seed.width;
-  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
-  std::array<int, 2> k_from{-p.start_slack_px, 0}, k_to{len - 1, len - 1 + p.start_slack_px};
-  std::array<double, 2> a_lo{-amax, -amax}, a_hi{amax, amax};
-  int k_step = std::max(1, len / p.max_starts);
-  int candidates = p.candidates_per_side;
-  if (previous) {
-    std::array<int, 2> kk{};
-    bool near = true;
-    for (int s = 0; s < 2 && near; ++s) {
-      double bd = 1e300;
-      for (int k = k_from[s]; k <= k_to[s]; ++k) {
-        cv::Point const q = B[((ib + k) % n + n) % n];
-        double const d = (Eigen::Vector2d(q.x, q.y) - previous->start[s]).squaredNorm();
-        if (d < bd) {
-          bd = d;
-          kk[s] = k;
-        }
-      }
-      near = bd <= p.track_px * p.track_px;
-    }
-    if (near) {
-      k_step = 1;
-      candidates = 2;
-      for (int s = 0; s < 2; ++s) {
-        Eigen::Vector2d const d = previous->dir[s];
-        double const a = std::atan2(inward.x() * d.y() - inward.y() * d.x(), inward.dot(d));
-        k_from[s] = kk[s] - p.track_px / 2;
-        k_to[s] = kk[s] + p.track_px / 2;
-        a_lo[s] = std::max(-amax, a - 2.0 * step);
-        a_hi[s] = std::min(amax, a + 2.0 * step);
-      }
-    }
-  }
-  std::vector<Ray> const side0 =
-      searchSide(B, ib, k_from[0], k_to[0], k_step, a_lo[0], a_hi[0], candidates, inward, pb - pe, gx, gy, fov, p);
-  std::vector<Ray> const side1 =
-      searchSide(B, ib, k_from[1], k_to[1], k_step, a_lo[1], a_hi[1], candidates, inward, pe - pb, gx, gy, fov, p);
+// The best pair of sides: near-parallel, not crossing, the strip between them shaft-like and
+// darker than the tissue beside it. score 0: none.
+struct Pair {
+  Ray a, b;
+  double score = 0.0;
+};
+Pair pairSides(std::vector<Ray> const& side0, std::vector<Ray> const& side1, cv::Mat const& feature,
+               FieldOfView const& fov, int level, StripSearchParams const& p, ContourLinesParams const& lp) {
   double const cos_max = std::cos(lp.max_angle_deg * M_PI / 180.0);
-  // Pair the sides: near-parallel, not crossing, the strip between them shaft-like.
-  Ray const* ba = nullptr;
-  Ray const* bb = nullptr;
-  double best = 0.0;
+  Pair best;
   for (auto const& a : side0)
     for (auto const& b : side1) {
       if (b.pos - a.pos < p.min_width_px || a.length < p.min_side_px || b.length < p.min_side_px || a.dir.dot(b.dir) < cos_max)
         continue;
-      if (a.score + b.score <= best) continue;
+      if (a.score + b.score <= best.score) continue;
       if (std::min(a.length, b.length) < p.min_length_ratio * std::max(a.length, b.length)) continue;
       double const lmin = std::min(a.length, b.length);
       double const w0 = (b.start - a.start).dot(-a.out);
@@ -220,10 +160,99 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
           if (o->size() >= 4) contrast = contrast && mi <= p.max_inside_outside_ratio * median(*o);
         if (!contrast) continue;
       }
-      best = a.score + b.score;
-      ba = &a;
-      bb = &b;
+      best.score = a.score + b.score;
+      best.a = a;
+      best.b = b;
     }
+  return best;
+}
+
+}  // namespace
+
+std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
+                                          FieldOfView const& fov, Seed const& seed, int level, int scale,
+                                          StripSearchParams const& p, ContourLinesParams const& lp,
+                                          StripCandidate const* previous) {
+  CV_Assert(feature.type() == CV_8U && gx.type() == CV_16S && gy.type() == CV_16S && gx.size() == feature.size() &&
+            fov.mask.size() == feature.size());
+  auto const& B = fov.border;
+  int const n = static_cast<int>(B.size());
+  if (n < 8 || seed.width < 3) return std::nullopt;
+  int const ib = seed.begin, ie = ((seed.end - 1) % n + n) % n;
+  Eigen::Vector2d const pb(B[ib].x, B[ib].y), pe(B[ie].x, B[ie].y);
+  if ((pb - pe).norm() < 2.0) return std::nullopt;
+  // Inward normal at the seed: the gradient of the distance to the FOV edge, else toward the centre.
+  Eigen::Vector2d inward(fov.centre.x - seed.position.x, fov.centre.y - seed.position.y);
+  if (!fov.depth.empty()) {
+    int const x = std::clamp(seed.position.x, 3, fov.depth.cols - 4), y = std::clamp(seed.position.y, 3, fov.depth.rows - 4);
+    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
+                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
+    if (g.norm() > 1e-6) inward = g;
+  }
+  if (inward.norm() < 1e-9) return std::nullopt;
+  inward.normalize();
+  // Sides start on the run (plus the slack; a run can extend beyond the shaft along a dark rim):
+  // side 0 has the shaft toward the run's end, side 1 toward its beginning. A run can also cover
+  // only part of a wide shaft's crossing (metal mirrors the tissue): if no pair is found, each
+  // side is searched again up to extend_px beyond the run's far end. With the strip of the
+  // previous frame, each side is searched only about where it was.
+  int const len = seed.width;
+  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  auto search = [&](std::array<int, 2> const& k_from, std::array<int, 2> const& k_to, int k_step,
+                    std::array<double, 2> const& a_lo, std::array<double, 2> const& a_hi, int candidates) {
+    std::vector<Ray> const side0 =
+        searchSide(B, ib, k_from[0], k_to[0], k_step, a_lo[0], a_hi[0], candidates, inward, pb - pe, gx, gy, fov, p);
+    std::vector<Ray> const side1 =
+        searchSide(B, ib, k_from[1], k_to[1], k_step, a_lo[1], a_hi[1], candidates, inward, pe - pb, gx, gy, fov, p);
+    return pairSides(side0, side1, feature, fov, level, p, lp);
+  };
+  std::array<double, 2> const full_lo{-amax, -amax}, full_hi{amax, amax};
+  Pair pr;
+  bool tracked = false;
+  if (previous) {
+    int const ext = std::max(p.start_slack_px, p.extend_px);
+    std::array<int, 2> const k_from{-ext, 0}, k_to{len - 1, len - 1 + ext};
+    std::array<int, 2> kk{};
+    bool near = true;
+    for (int s = 0; s < 2 && near; ++s) {
+      double bd = 1e300;
+      for (int k = k_from[s]; k <= k_to[s]; ++k) {
+        cv::Point const q = B[((ib + k) % n + n) % n];
+        double const d = (Eigen::Vector2d(q.x, q.y) - previous->start[s]).squaredNorm();
+        if (d < bd) {
+          bd = d;
+          kk[s] = k;
+        }
+      }
+      near = bd <= p.track_px * p.track_px;
+    }
+    if (near) {
+      tracked = true;
+      std::array<int, 2> t_from{}, t_to{};
+      std::array<double, 2> t_lo{}, t_hi{};
+      for (int s = 0; s < 2; ++s) {
+        Eigen::Vector2d const d = previous->dir[s];
+        double const a = std::atan2(inward.x() * d.y() - inward.y() * d.x(), inward.dot(d));
+        t_from[s] = kk[s] - p.track_px / 2;
+        t_to[s] = kk[s] + p.track_px / 2;
+        t_lo[s] = std::max(-amax, a - 2.0 * step);
+        t_hi[s] = std::min(amax, a + 2.0 * step);
+      }
+      pr = search(t_from, t_to, 1, t_lo, t_hi, 2);
+    }
+  }
+  if (!tracked) {
+    int const k_step = std::max(1, len / p.max_starts);
+    pr = search({-p.start_slack_px, 0}, {len - 1, len - 1 + p.start_slack_px}, k_step, full_lo, full_hi,
+                p.candidates_per_side);
+    if (pr.score <= 0.0 && p.extend_px > p.start_slack_px) {
+      int const ext = p.extend_px, k_step2 = std::max(1, (len + ext) / p.max_starts);
+      pr = search({-ext, 0}, {len - 1, len - 1 + ext}, k_step2, full_lo, full_hi, p.candidates_per_side);
+    }
+  }
+  Ray const* ba = pr.score > 0.0 ? &pr.a : nullptr;
+  Ray const* bb = &pr.b;
+  double const best = pr.score;
   if (!ba) return std::nullopt;
   StripCandidate out;
   out.score = best;

@@ -304,7 +304,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             ang.push_back(ba);
           }
         }
-        if (!overlay_dir.empty() && frame % 50 == 0) {
+        if (!overlay_dir.empty() && frames_annot % 10 == 1) {
           cv::Mat ov = im.clone();
           std::vector<Eigen::Vector3d> ti;
           for (auto const& p : out.insertion_points) ti.push_back(p.image_point);

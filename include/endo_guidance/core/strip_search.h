@@ -19,6 +19,7 @@ struct StripSearchParams {
   double max_angle_deg = 75.0;    ///< sides searched within this angle of the inward normal at the seed
   double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 3)
   int start_slack_px = 2;         ///< border points: sides start on the seed's run or this far beyond its ends
+  int extend_px = 40;             ///< border points: ... or this far beyond the end the shaft lies toward
   int track_px = 6;               ///< processing px: with last frame's strip, sides start this close to its sides
   int max_starts = 24;            ///< start points per side along the run (a long run is sampled)
   double full_response = 40.0;    ///< Sobel units (feature): an edge this steep counts fully
