@@ -125,6 +125,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         why = f.rejection;
         return;
       }
+      if (getenv("STRIP_DEBUG")) {
+        double cov[2];
+        for (int k = 0; k < 2; ++k) {
+          double const L = (sc->sides.points[k].back() - sc->sides.points[k].front()).norm();
+          cov[k] = f.edges[k].size() / std::max(1.0, L / params_.contours.refine_step_px);
+        }
+        fprintf(stderr, "STRIP entry (%.0f %.0f) cov %.2f %.2f res %.2f %.2f score %.0f\n", f.contour->entry_px.x(), f.contour->entry_px.y(), cov[0], cov[1], f.contour->line_residual_px[0], f.contour->line_residual_px[1], sc->score);
+      }
       best = sc->region;
       best_fit = std::move(f);
       best_level = static_cast<int>(T.size()) - 1;

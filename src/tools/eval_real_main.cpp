@@ -20,6 +20,7 @@
 #include <sstream>
 #include <string>
 
+#include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/pipeline.h"
 #include "tool_util.h"
@@ -27,6 +28,7 @@
 
 namespace fs = std::filesystem;
 using namespace endo_guidance::core;
+namespace io = endo_guidance::io;
 
 namespace {
 
@@ -261,7 +263,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     pp.radius = 0.004;
     Pipeline pipe(K, cv::Size(720, 576), pp);
     std::vector<double> ang, dist;
-    int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0;
+    int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0, false_dets = 0;
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
@@ -283,6 +285,15 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
         SegmentationResult const& r = out.segmentation;
         ++frames_annot;
         dets += static_cast<int>(r.contours.size());
+        // A detection whose image axis passes within 20 px of no annotated shaft axis is false.
+        for (auto const& c : r.contours) {
+          Eigen::Vector3d const l = imageAxis(c);
+          bool near = false;
+          for (auto const& a : it->second)
+            near = near || 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) +
+                                  std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1)))) < 20.0;
+          false_dets += !near;
+        }
         for (auto const& a : it->second) {
           ++n;
           Eigen::Vector2d const da = (a.b - a.a).normalized();
@@ -318,8 +329,9 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
       ++frame;
     }
     std::printf("robotic dataset %d: %d annotated frames, %d annotated shafts, %d found (axis within 20 px) = %.1f %%, "
-                "%.2f detections/frame\n", ds, frames_annot, n, found, 100.0 * found / std::max(1, n),
-                static_cast<double>(dets) / std::max(1, frames_annot));
+                "%.2f detections/frame, %.2f false/frame (axis within 20 px of no annotated one)\n", ds, frames_annot, n, found,
+                100.0 * found / std::max(1, n), static_cast<double>(dets) / std::max(1, frames_annot),
+                static_cast<double>(false_dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
                 percentile(dist, 0.5), percentile(dist, 0.9), percentile(ang, 0.5), percentile(ang, 0.9));
     std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:%s\n", frame - 1,
@@ -363,7 +375,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data = "../shared/data", overlay;
+  std::string data = "../shared/data", overlay, params_path;
   int min_area = 1500;
   InvivoChecks chk;
   bool invivo = true, robotic = true;
@@ -378,8 +390,10 @@ int main(int argc, char** argv) {
     else if (a == "--max-line-px" && i + 1 < argc) chk.max_line_px = std::atof(argv[++i]);
     else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
     else if (a == "--robotic-only") invivo = false;
+    else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
+                           "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
                            "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
       return 2;
     }
@@ -388,7 +402,16 @@ int main(int argc, char** argv) {
     std::printf("SKIPPED: real data folder '%s' absent (it lives in ../shared/data beside the repository)\n", data.c_str());
     return 0;
   }
-  SegmentationParams sp;
+  PipelineParams pp;
+  if (!params_path.empty()) {
+    try {
+      io::loadPipelineYaml(params_path, pp);
+    } catch (std::exception const& e) {
+      std::fprintf(stderr, "endo_guidance_eval_real: %s\n", e.what());
+      return 2;
+    }
+  }
+  SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
   if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk);
   if (robotic) evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp);
