@@ -95,7 +95,14 @@ std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int
         if (q.score > best.score) best = q;
       }
     }
-    r = best;
+    // Then finer, at the best start (a long side needs a fraction of a degree).
+    cv::Point const s = border[((first + best.pos) % n + n) % n];
+    Ray fine = best;
+    for (double a = best.angle - step / 3.0; a <= best.angle + step / 3.0 + 1e-9; a += step / 12.0) {
+      Ray const q = make(s, a, best.pos);
+      if (q.score > fine.score) fine = q;
+    }
+    r = fine;
   }
   return picked;
 }
@@ -121,6 +128,17 @@ Pair pairSides(std::vector<Ray> const& side0, std::vector<Ray> const& side1, cv:
       double const w1 = (b.start + lmin * b.dir - a.start - lmin * a.dir).dot(-a.out);
       if (w0 < p.min_width_px || w1 < p.min_end_width * w0) continue;  // too thin, crossing or pinched
       if (lmin < w0) continue;  // a blob's rim, not a shaft (refineContour checks the elongation of the refined lines)
+      // Both sides head into the view: a dark corner or rim has a side along the FOV edge.
+      if (!fov.depth.empty()) {
+        bool inward = true;
+        for (Ray const* r : {&a, &b}) {
+          Eigen::Vector2d const e = r->start + r->length * r->dir;
+          int const x = std::clamp(static_cast<int>(std::lround(e.x())), 0, fov.depth.cols - 1);
+          int const y = std::clamp(static_cast<int>(std::lround(e.y())), 0, fov.depth.rows - 1);
+          inward = inward && fov.depth.at<float>(y, x) >= lp.min_entry_sine * r->length;
+        }
+        if (!inward) continue;
+      }
       int low = 0, all = 0;
       for (double t = 1.0; t <= lmin; t += 2.0) {
         Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;

@@ -17,7 +17,7 @@ namespace endo_guidance::core {
 struct StripSearchParams {
   bool enabled = true;            ///< search seeds whose grown regions gave no shaft (a leaked region)
   double max_angle_deg = 75.0;    ///< sides searched within this angle of the inward normal at the seed
-  double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 3)
+  double coarse_step_deg = 3.0;   ///< angular step of the first pass (then refined to step / 3, then step / 12)
   int start_slack_px = 2;         ///< border points: sides start on the seed's run or this far beyond its ends
   int extend_px = 40;             ///< border points: ... or this far beyond the end the shaft lies toward
   int track_px = 6;               ///< processing px: with last frame's strip, sides start this close to its sides
