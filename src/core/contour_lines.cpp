@@ -26,6 +26,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kNotElongated: return "not elongated";
     case ContourRejection::kNotFilled: return "region does not fill the strip between its lines";
     case ContourRejection::kAlongBorder: return "runs along the field-of-view border instead of into the view";
+    case ContourRejection::kLowContrast: return "not less chromatic than the tissue beside it (full resolution)";
   }
   return "unknown";
 }

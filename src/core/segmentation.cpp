@@ -119,19 +119,15 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
       if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
         f.contour.reset();
-        f.rejection = ContourRejection::kNotStraight;
+        f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
+      }
+      if (f.contour && !stripContrastFullRes(bgr, *f.contour, params_.strip.max_full_res_ratio)) {
+        f.contour.reset();
+        f.rejection = ContourRejection::kLowContrast;
       }
       if (!f.contour) {
         why = f.rejection;
         return;
-      }
-      if (getenv("STRIP_DEBUG")) {
-        double cov[2];
-        for (int k = 0; k < 2; ++k) {
-          double const L = (sc->sides.points[k].back() - sc->sides.points[k].front()).norm();
-          cov[k] = f.edges[k].size() / std::max(1.0, L / params_.contours.refine_step_px);
-        }
-        fprintf(stderr, "STRIP entry (%.0f %.0f) cov %.2f %.2f res %.2f %.2f score %.0f\n", f.contour->entry_px.x(), f.contour->entry_px.y(), cov[0], cov[1], f.contour->line_residual_px[0], f.contour->line_residual_px[1], sc->score);
       }
       best = sc->region;
       best_fit = std::move(f);

@@ -7,6 +7,8 @@
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
+#include "endo_guidance/core/colour_feature.h"
+
 namespace endo_guidance::core {
 
 namespace {
@@ -321,6 +323,35 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
     }
     if (best > tol) return false;
   }
+  return true;
+}
+
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, double max_ratio) {
+  CV_Assert(bgr.type() == CV_8UC3);
+  Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
+  std::vector<float> in, out[2];
+  auto at = [&](Eigen::Vector2d const& q, std::vector<float>& v) {
+    int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+    if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
+    cv::Vec3b const& p = bgr.at<cv::Vec3b>(y, x);
+    v.push_back(ColourFeature::chroma(p[0], p[1], p[2]));
+  };
+  for (int i = 1; i < 40; ++i) {
+    Eigen::Vector2d const m = e + (i / 40.0) * ax;
+    Eigen::Vector2d const f0 = footOnLine(c.lines[0], m), f1 = footOnLine(c.lines[1], m);
+    double const d = std::max(3.0, 0.3 * (f1 - f0).norm());
+    for (double f : {0.25, 0.5, 0.75}) at(f0 + f * (f1 - f0), in);
+    at(f0 - d * c.lines[0].head<2>(), out[0]);  // the normals point into the shaft
+    at(f1 - d * c.lines[1].head<2>(), out[1]);
+  }
+  if (in.empty()) return false;
+  auto median = [](std::vector<float>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+    return static_cast<double>(v[v.size() / 2]);
+  };
+  double const mi = median(in);
+  for (auto& o : out)
+    if (o.size() >= 4 && mi > max_ratio * median(o)) return false;
   return true;
 }
 

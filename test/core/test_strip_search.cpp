@@ -6,6 +6,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/segmentation.h"
 #include "endo_guidance/core/strip_search.h"
 
@@ -196,4 +197,29 @@ TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
   auto const r2 = with.process(img);
   ASSERT_EQ(r2.contours.size(), 1u);
   EXPECT_LT(onShaft(r2.contours[0]), 0.5);
+}
+
+// Full-resolution contrast: a band of white specular speckles on red tissue (grey once averaged
+// at the processing scale) is refused; a grey shaft on the same tissue is accepted.
+TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
+  cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
+  ApparentContour c;
+  c.entry_px = {0, 240};
+  c.tip_px = {400, 240};
+  c.lines = {Eigen::Vector3d(0, 1, -220), Eigen::Vector3d(0, -1, 260)};  // shaft between v = 220 and 260
+  cv::Mat speckled = img.clone();
+  cv::RNG rng(3);
+  for (int y = 220; y <= 260; ++y)
+    for (int x = 0; x < 400; ++x)
+      if (rng.uniform(0.0, 1.0) < 0.4) speckled.at<cv::Vec3b>(y, x) = cv::Vec3b(255, 255, 255);  // 40 % of the band
+  cv::Mat small;
+  cv::resize(speckled, small, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  cv::Vec3b const avg = small.at<cv::Vec3b>(120, 100);
+  float const averaged = ColourFeature::chroma(avg[0], avg[1], avg[2]), tissue = ColourFeature::chroma(70, 90, 200);
+  EXPECT_LT(averaged, 0.75 * tissue) << "the band is not greyer than the tissue once averaged: no test";
+  EXPECT_FALSE(stripContrastFullRes(speckled, c, 0.5));
+  cv::Mat shaft = img.clone();
+  shaft(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
+  EXPECT_TRUE(stripContrastFullRes(shaft, c, 0.5));
+  EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, 0.5), cv::Exception);
 }

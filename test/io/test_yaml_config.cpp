@@ -65,6 +65,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.strip.min_inside_low, defaults.segmentation.strip.min_inside_low);
   EXPECT_EQ(shipped.segmentation.strip.max_inside_outside_ratio, defaults.segmentation.strip.max_inside_outside_ratio);
   EXPECT_EQ(shipped.segmentation.strip.min_length_ratio, defaults.segmentation.strip.min_length_ratio);
+  EXPECT_EQ(shipped.segmentation.strip.max_full_res_ratio, defaults.segmentation.strip.max_full_res_ratio);
   PipelineParams off;
   io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n"), off);
   EXPECT_FALSE(off.segmentation.strip.enabled);

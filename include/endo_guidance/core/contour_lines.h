@@ -45,7 +45,7 @@ struct ContourLinesParams {
 
 enum class ContourRejection {
   kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
-  kNotElongated, kNotFilled, kAlongBorder
+  kNotElongated, kNotFilled, kAlongBorder, kLowContrast
 };
 char const* toString(ContourRejection r);
 

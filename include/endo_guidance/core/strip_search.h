@@ -31,6 +31,7 @@ struct StripSearchParams {
   double max_inside_outside_ratio = 0.5;  ///< the strip's median feature over the tissue's beside each side
   double min_end_width = 0.45;     ///< the strip's far width over its entry width (perspective narrows it; crossing sides do not)
   int candidates_per_side = 8;    ///< best side hypotheses paired
+  double max_full_res_ratio = 0.5;  ///< stripContrastFullRes(): median chroma inside over outside
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
 };
 
@@ -59,5 +60,12 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
 /// max_refine_shift (processing px) of the side it was refined from, at both ends of that side.
 /// The wide sub-pixel pass can otherwise lock onto a neighbouring tissue edge.
 bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, int scale, StripSearchParams const& params);
+
+/// Whether the shaft between the contour's lines is, on the full-resolution image, clearly less
+/// chromatic than the tissue beside each line: median chroma inside <= max_ratio x the median a
+/// third of a width outside (sides beyond the image are not tested). At the processing scale a
+/// band of specular speckles on wet tissue (white dots between red pixels) averages to a grey
+/// strip; at full resolution most of it is tissue.
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, double max_ratio);
 
 }  // namespace endo_guidance::core
