@@ -92,12 +92,13 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       }
     Memory const* mem = remembered(seed.position);
     if (mem && !mem->accepted && mem->age + 1 < params_.full_search_every) {
-      if (auto r = grower_.grow(seed.position, T[mem->level], si)) {
+      // (a seed whose regions all leaked has none to claim)
+      if (auto r = mem->grown ? grower_.grow(seed.position, T[mem->level], si) : std::nullopt) {
         res.regions.push_back(*r);
         res.region_status.push_back(mem->why);
         grower_.claim(*r, 255);
       }
-      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1});
+      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1, std::nullopt, mem->grown});
       continue;
     }
     std::optional<Region> best;
@@ -190,7 +191,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // in the feature's gradient (strip_search.h), once per seed.
     if (!best && params_.strip.enabled) tryStrip(nullptr);
     if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, best_strip});
-    else if (smallest) memory_now.push_back({seed.position, smallest_level, 0.0, false, why, 0});
+    else memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, std::nullopt, smallest.has_value()});
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;
     res.regions.push_back(*keep);

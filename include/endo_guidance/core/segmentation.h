@@ -75,6 +75,7 @@ class InstrumentSegmenter {
     ContourRejection why = ContourRejection::kNone;
     int age = 0;            // frames since its last full search
     std::optional<StripCandidate> strip;  // the strip it was found as (strip search), if so
+    bool grown = true;      // a region was kept (false: every level leaked)
   };
   Memory const* remembered(cv::Point const& seed) const;
   RegionGrower grower_;
