@@ -229,12 +229,15 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   return ok;
 }
 
-void evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp) {
+// Returns false when a requested regression bound (per sequence) is violated.
+bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp,
+                 double min_found, double max_false_per_frame) {
   std::ifstream csv(root / "shaft_axis_annotations.csv");
   if (!csv) {
     std::printf("robotic sequences: %s/shaft_axis_annotations.csv absent: skipped\n", root.c_str());
-    return;
+    return true;
   }
+  bool ok = true;
   struct Ann { int frame; Eigen::Vector2d a, b; };
   std::map<int, std::vector<Ann>> ann;  // per dataset
   std::string line;
@@ -334,6 +337,14 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                 static_cast<double>(false_dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
                 percentile(dist, 0.5), percentile(dist, 0.9), percentile(ang, 0.5), percentile(ang, 0.9));
+    double const found_frac = static_cast<double>(found) / std::max(1, n);
+    double const false_rate = static_cast<double>(false_dets) / std::max(1, frames_annot);
+    if ((min_found >= 0.0 && found_frac < min_found) || (max_false_per_frame >= 0.0 && false_rate > max_false_per_frame)) {
+      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): VIOLATED\n", min_found, max_false_per_frame);
+      ok = false;
+    } else if (min_found >= 0.0 || max_false_per_frame >= 0.0) {
+      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): met\n", min_found, max_false_per_frame);
+    }
     std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:%s\n", frame - 1,
                 trocar_track.empty() ? " none discovered" : "");
     if (verbose && all_axes.size() >= 2) {
@@ -370,6 +381,7 @@ void evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                   where.c_str());
     }
   }
+  return ok;
 }
 
 }  // namespace
@@ -379,6 +391,7 @@ int main(int argc, char** argv) {
   int min_area = 1500;
   InvivoChecks chk;
   bool invivo = true, robotic = true;
+  double robotic_min_found = -1.0, robotic_max_false = -1.0;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
     if (a == "--data" && i + 1 < argc) data = argv[++i];
@@ -391,9 +404,12 @@ int main(int argc, char** argv) {
     else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
     else if (a == "--robotic-only") invivo = false;
     else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
+    else if (a == "--robotic-min-found" && i + 1 < argc) robotic_min_found = std::atof(argv[++i]);
+    else if (a == "--robotic-max-false-per-frame" && i + 1 < argc) robotic_max_false = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
+                           "       [--robotic-min-found F] [--robotic-max-false-per-frame F]   (per robotic sequence; exit 1 if violated)\n"
                            "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
       return 2;
     }
@@ -414,6 +430,6 @@ int main(int argc, char** argv) {
   SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
   if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk);
-  if (robotic) evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp);
+  if (robotic) ok = evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp, robotic_min_found, robotic_max_false) && ok;
   return ok ? 0 : 1;
 }
