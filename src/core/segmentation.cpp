@@ -122,7 +122,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         f.contour.reset();
         f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
       }
-      if (f.contour && !stripContrastFullRes(bgr, *f.contour, params_.strip.max_full_res_ratio)) {
+      if (f.contour && !stripContrastFullRes(bgr, *f.contour, params_.strip)) {
         f.contour.reset();
         f.rejection = ContourRejection::kLowContrast;
       }

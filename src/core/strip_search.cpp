@@ -326,15 +326,17 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
   return true;
 }
 
-bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, double max_ratio) {
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p) {
   CV_Assert(bgr.type() == CV_8UC3);
   Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
   std::vector<float> in, out[2];
+  int specular = 0;  // near-white samples inside: highlights
   auto at = [&](Eigen::Vector2d const& q, std::vector<float>& v) {
     int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
     if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
-    cv::Vec3b const& p = bgr.at<cv::Vec3b>(y, x);
-    v.push_back(ColourFeature::chroma(p[0], p[1], p[2]));
+    cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
+    v.push_back(ColourFeature::chroma(px[0], px[1], px[2]));
+    if (&v == &in && std::max({px[0], px[1], px[2]}) >= 230 && v.back() < 30.f) ++specular;
   };
   for (int i = 1; i < 40; ++i) {
     Eigen::Vector2d const m = e + (i / 40.0) * ax;
@@ -349,7 +351,10 @@ bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, double m
     std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
     return static_cast<double>(v[v.size() / 2]);
   };
+  // A weakly contrasted strip is a shaft only if matte: a band of highlights on wet tissue is not.
   double const mi = median(in);
+  bool const matte = specular < p.max_specular_fraction * static_cast<double>(in.size());
+  double const max_ratio = matte ? p.max_full_res_ratio_matte : p.max_full_res_ratio;
   for (auto& o : out)
     if (o.size() >= 4 && mi > max_ratio * median(o)) return false;
   return true;

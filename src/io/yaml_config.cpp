@@ -110,6 +110,8 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/strip_max_inside_outside_ratio", d(S.strip.max_inside_outside_ratio)},
       {"segmentation/strip_min_length_ratio", d(S.strip.min_length_ratio)},
       {"segmentation/strip_max_full_res_ratio", d(S.strip.max_full_res_ratio)},
+      {"segmentation/strip_max_full_res_ratio_matte", d(S.strip.max_full_res_ratio_matte)},
+      {"segmentation/strip_max_specular_fraction", d(S.strip.max_specular_fraction)},
       {"pose/min_distance", d(p.pose.min_distance)},
       {"pose/max_distance", d(p.pose.max_distance)},
       {"insertion_points/max_points", i(T.max_points)},

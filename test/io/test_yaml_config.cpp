@@ -66,6 +66,8 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.strip.max_inside_outside_ratio, defaults.segmentation.strip.max_inside_outside_ratio);
   EXPECT_EQ(shipped.segmentation.strip.min_length_ratio, defaults.segmentation.strip.min_length_ratio);
   EXPECT_EQ(shipped.segmentation.strip.max_full_res_ratio, defaults.segmentation.strip.max_full_res_ratio);
+  EXPECT_EQ(shipped.segmentation.strip.max_full_res_ratio_matte, defaults.segmentation.strip.max_full_res_ratio_matte);
+  EXPECT_EQ(shipped.segmentation.strip.max_specular_fraction, defaults.segmentation.strip.max_specular_fraction);
   PipelineParams off;
   io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n"), off);
   EXPECT_FALSE(off.segmentation.strip.enabled);

@@ -32,6 +32,8 @@ struct StripSearchParams {
   double min_end_width = 0.45;     ///< the strip's far width over its entry width (perspective narrows it; crossing sides do not)
   int candidates_per_side = 8;    ///< best side hypotheses paired
   double max_full_res_ratio = 0.5;  ///< stripContrastFullRes(): median chroma inside over outside
+  double max_full_res_ratio_matte = 0.9;  ///< ... the same for a strip with few highlights inside
+  double max_specular_fraction = 0.05;    ///< ... "few": this fraction of the inside samples
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
 };
 
@@ -62,10 +64,13 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
 bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, int scale, StripSearchParams const& params);
 
 /// Whether the shaft between the contour's lines is, on the full-resolution image, clearly less
-/// chromatic than the tissue beside each line: median chroma inside <= max_ratio x the median a
-/// third of a width outside (sides beyond the image are not tested). At the processing scale a
-/// band of specular speckles on wet tissue (white dots between red pixels) averages to a grey
-/// strip; at full resolution most of it is tissue.
-bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, double max_ratio);
+/// chromatic than the tissue beside each line: median chroma inside <= max_full_res_ratio x the
+/// median a third of a width outside (sides beyond the image are not tested), or
+/// <= max_full_res_ratio_matte x when fewer than max_specular_fraction of the inside samples are
+/// highlights (near white). At the processing scale a band of specular speckles on wet tissue
+/// (white dots between red pixels) averages to a grey strip; at full resolution most of it is
+/// tissue and many of its samples are white. Metal mirroring the tissue is weakly contrasted but
+/// matte.
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, StripSearchParams const& params);
 
 }  // namespace endo_guidance::core
