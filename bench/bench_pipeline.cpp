@@ -15,6 +15,7 @@
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/sigma_filter.h"
+#include "endo_guidance/core/strip_search.h"
 #include "ratio_reporter.h"
 
 using namespace endo_guidance::core;
@@ -107,6 +108,25 @@ void BM_Stage_Segmentation(benchmark::State& st) {
   for (auto _ : st) benchmark::DoNotOptimize(seg.process(f.images[i++ % f.images.size()]));
 }
 
+// The strip search from every seed of a frame (full search, as on a seed's first frame; a tracked
+// shaft is searched only about its last sides), including the Sobel of the feature.
+void BM_Stage_StripSearch(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
+  cv::Mat small, feat, filt, gx, gy;
+  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  ColourFeature().compute(small, feat);
+  sigmaFilter(feat, filt, 1, 10);
+  FieldOfView const fov = detectFieldOfView(small);
+  std::vector<Seed> const seeds = findSeeds(filt, fov);
+  for (auto _ : st) {
+    cv::Sobel(filt, gx, CV_16S, 1, 0, 3);
+    cv::Sobel(filt, gy, CV_16S, 0, 1, 3);
+    for (auto const& sd : seeds) benchmark::DoNotOptimize(searchStrip(filt, gx, gy, fov, sd, 45, s, {}, {}));
+  }
+  st.counters["seeds"] = static_cast<double>(seeds.size());
+}
+
 // The simulator's cost per frame: rendering three instruments on textured tissue (its frame
 // rate is bounded by 1 / this).
 void BM_SimulatorRender(benchmark::State& st) {
@@ -128,6 +148,7 @@ BENCHMARK(BM_Stage_Resize)->Apply(sizes);
 BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
 BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);
 BENCHMARK(BM_Stage_Segmentation)->Apply(sizes);
+BENCHMARK(BM_Stage_StripSearch)->Apply(sizes);
 BENCHMARK(BM_SimulatorRender)->Apply(sizes);
 
 }  // namespace
