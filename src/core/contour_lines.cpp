@@ -271,6 +271,16 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
 
 }  // namespace
 
+void setFarEnd(SideFit& fit) {
+  double fd = -1.0;
+  for (int s = 0; s < 2; ++s)
+    for (auto const& q : fit.points[s])
+      if ((q - fit.entry).norm() > fd) {
+        fd = (q - fit.entry).norm();
+        fit.far = q;
+      }
+}
+
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p) {
   SideFit fit;
   auto const& B = region.boundary;
@@ -340,14 +350,7 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   if (std::abs(fit.lines[0].head<2>().dot(fit.lines[1].head<2>())) < std::cos(p.max_angle_deg * M_PI / 180.0))
     return reject(ContourRejection::kNotParallel);
   fit.entry = toFull(Eigen::Vector2d(region.seed.x, region.seed.y));
-  // The far end: the side point farthest from the entry.
-  double fd = -1.0;
-  for (int s = 0; s < 2; ++s)
-    for (auto const& q : fit.points[s])
-      if ((q - fit.entry).norm() > fd) {
-        fd = (q - fit.entry).norm();
-        fit.far = q;
-      }
+  setFarEnd(fit);
   // Orient each line with the shaft on its positive side: the mean of both sides' points.
   Eigen::Vector2d inside = Eigen::Vector2d::Zero();
   for (int s = 0; s < 2; ++s) {

@@ -50,6 +50,13 @@ void walk(Ray& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, 
   r.length = best_t;
 }
 
+// Median (upper) of a non-empty sample; reorders it.
+template <typename T>
+double median(std::vector<T>& v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return static_cast<double>(v[v.size() / 2]);
+}
+
 Eigen::Vector2d rotate(Eigen::Vector2d const& v, double a) {
   double const c = std::cos(a), s = std::sin(a);
   return {c * v.x() - s * v.y(), s * v.x() + c * v.y()};
@@ -169,10 +176,6 @@ Pair pairSides(std::vector<Ray> const& side0, std::vector<Ray> const& side1, cv:
           add(qa + d * a.out, o0);
           add(qb + d * b.out, o1);
         }
-        auto median = [](std::vector<int>& v) {
-          std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
-          return static_cast<double>(v[v.size() / 2]);
-        };
         if (in.empty()) continue;
         double const mi = median(in);
         bool contrast = true;
@@ -291,13 +294,7 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
     sf.inliers += static_cast<int>(sf.points[s].size());
   }
   sf.entry = toFull(Eigen::Vector2d(seed.position.x, seed.position.y));
-  double fd = -1.0;
-  for (int s = 0; s < 2; ++s)
-    for (auto const& q : sf.points[s])
-      if ((q - sf.entry).norm() > fd) {
-        fd = (q - sf.entry).norm();
-        sf.far = q;
-      }
+  setFarEnd(sf);
   Region& rg = out.region;
   rg.seed = seed.position;
   rg.threshold = level;
@@ -347,10 +344,6 @@ bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSea
     at(f1 - d * c.lines[1].head<2>(), out[1]);
   }
   if (in.empty()) return false;
-  auto median = [](std::vector<float>& v) {
-    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
-    return static_cast<double>(v[v.size() / 2]);
-  };
   // A weakly contrasted strip is a shaft only if matte: a band of highlights on wet tissue is not.
   double const mi = median(in);
   bool const matte = specular < p.max_specular_fraction * static_cast<double>(in.size());

@@ -60,14 +60,11 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.seeds.dark_border_level, defaults.segmentation.seeds.dark_border_level);
   EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
   EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
-  EXPECT_EQ(shipped.segmentation.strip.max_angle_deg, defaults.segmentation.strip.max_angle_deg);
-  EXPECT_EQ(shipped.segmentation.strip.min_response, defaults.segmentation.strip.min_response);
-  EXPECT_EQ(shipped.segmentation.strip.min_inside_low, defaults.segmentation.strip.min_inside_low);
-  EXPECT_EQ(shipped.segmentation.strip.max_inside_outside_ratio, defaults.segmentation.strip.max_inside_outside_ratio);
-  EXPECT_EQ(shipped.segmentation.strip.min_length_ratio, defaults.segmentation.strip.min_length_ratio);
-  EXPECT_EQ(shipped.segmentation.strip.max_full_res_ratio, defaults.segmentation.strip.max_full_res_ratio);
-  EXPECT_EQ(shipped.segmentation.strip.max_full_res_ratio_matte, defaults.segmentation.strip.max_full_res_ratio_matte);
-  EXPECT_EQ(shipped.segmentation.strip.max_specular_fraction, defaults.segmentation.strip.max_specular_fraction);
+  using SP = StripSearchParams;
+  for (double SP::*m : {&SP::max_angle_deg, &SP::min_response, &SP::min_inside_low, &SP::max_inside_outside_ratio,
+                        &SP::min_length_ratio, &SP::max_full_res_ratio, &SP::max_full_res_ratio_matte,
+                        &SP::max_specular_fraction})
+    EXPECT_EQ(shipped.segmentation.strip.*m, defaults.segmentation.strip.*m);
   PipelineParams off;
   io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n"), off);
   EXPECT_FALSE(off.segmentation.strip.enabled);

@@ -97,6 +97,8 @@ struct SideFit {
   ContourRejection rejection = ContourRejection::kNone;
 };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+/// Sets fit.far to the side point farthest from fit.entry.
+void setFarEnd(SideFit& fit);
 /// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge
 /// pass per side; (edge points) / (1 + RMS residual), or -1 when a side has no edge.
 double scoreSides(SideFit const& sides, cv::Mat const& bgr_full, ContourLinesParams const& params);
