@@ -62,8 +62,9 @@ Eigen::Vector2d rotate(Eigen::Vector2d const& v, double a) {
   return {c * v.x() - s * v.y(), s * v.x() + c * v.y()};
 }
 
-// The best rays of one side: starts within the slack of the run's end, a coarse angular sweep,
-// the best few (distinct in angle) refined.
+// The best rays of one side: starts at border points first+k_from..first+k_to (every k_step), a
+// coarse angular sweep over [a_lo, a_hi] about the inward normal, then the best few distinct
+// hypotheses (another start or another angle) refined to step / 3 and step / 12.
 std::vector<Ray> searchSide(std::vector<cv::Point> const& border, int first, int k_from, int k_to, int k_step,
                             double a_lo, double a_hi, int candidates, Eigen::Vector2d const& inward, Eigen::Vector2d const& away, cv::Mat const& gx,
                             cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
@@ -273,12 +274,11 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
       pr = search({-ext, 0}, {len - 1, len - 1 + ext}, k_step2, full_lo, full_hi, p.candidates_per_side);
     }
   }
-  Ray const* ba = pr.score > 0.0 ? &pr.a : nullptr;
+  if (pr.score <= 0.0) return std::nullopt;
+  Ray const* ba = &pr.a;
   Ray const* bb = &pr.b;
-  double const best = pr.score;
-  if (!ba) return std::nullopt;
   StripCandidate out;
-  out.score = best;
+  out.score = pr.score;
   double const off = 0.5 * (scale - 1);
   auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
   SideFit& sf = out.sides;
