@@ -51,7 +51,7 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
   // Distance to the area's edge, the image's edge included (a zero frame around it).
   cv::Mat padded, dist;
   cv::copyMakeBorder(area, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
-  cv::distanceTransform(padded, dist, cv::DIST_L2, 3);
+  cv::distanceTransform(padded, dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   fov.depth = dist(cv::Rect(1, 1, area.cols, area.rows)).clone();
   std::vector<std::vector<cv::Point>> c2;
   cv::findContours(er.clone(), c2, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);

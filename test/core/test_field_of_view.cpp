@@ -18,6 +18,12 @@ TEST(FieldOfView, FullRectangle) {
     EXPECT_GE(std::min({p.x, p.y, 159 - p.x, 119 - p.y}), 2);
     EXPECT_LE(std::min({p.x, p.y, 159 - p.x, 119 - p.y}), 4);
   }
+  // Depth: the distance to the area's edge, the image's edge included (a full-rectangle view has
+  // no black surround; the shafts still enter across the image edge).
+  EXPECT_NEAR(f.depth.at<float>(60, 80), 60.f, 1.5f);
+  EXPECT_NEAR(f.depth.at<float>(0, 80), 1.f, 0.5f);
+  EXPECT_NEAR(f.depth.at<float>(60, 0), 1.f, 0.5f);
+  EXPECT_NEAR(f.depth.at<float>(30, 10), 11.f, 1.0f);
 }
 
 TEST(FieldOfView, CircularWithBlackSurround) {
@@ -40,4 +46,8 @@ TEST(FieldOfView, SideBars) {
   EXPECT_FALSE(f.circular);
   EXPECT_NEAR(f.bounds.x, 12, 1);
   EXPECT_NEAR(f.bounds.width, 176, 2);
+  // Between the bars the depth is the distance to the nearer bar or to the top/bottom edge.
+  EXPECT_NEAR(f.depth.at<float>(50, 100), 50.f, 1.5f);
+  EXPECT_NEAR(f.depth.at<float>(50, 20), 8.f, 1.5f);
+  EXPECT_NEAR(f.depth.at<float>(2, 100), 3.f, 0.5f);
 }
