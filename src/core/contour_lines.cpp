@@ -450,12 +450,10 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   }
   // A shaft enters the view across its border: its direction (entry -> tip) must point inward,
   // not along the border (the inward normal is the gradient of the distance to the FOV edge).
-  if (!fov.depth.empty()) {
+  {
     Eigen::Vector2d const ps = (entry - Eigen::Vector2d(off, off)) / scale;
-    int const x = std::clamp(static_cast<int>(std::lround(ps.x())), 3, fov.depth.cols - 4);
-    int const y = std::clamp(static_cast<int>(std::lround(ps.y())), 3, fov.depth.rows - 4);
-    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
-                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
+    Eigen::Vector2d const g =
+        depthGradient(fov, cv::Point(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y()))));
     if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);
   }
   // Shape: a shaft region fills the strip between its lines and stays inside it, and the strip

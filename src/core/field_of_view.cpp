@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/core/field_of_view.h"
 
+#include <algorithm>
+
 #include <opencv2/imgproc.hpp>
 
 namespace endo_guidance::core {
@@ -60,6 +62,13 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
     if (c2[i].size() > c2[bj].size()) bj = i;
   if (!c2.empty()) fov.border = std::move(c2[bj]);
   return fov;
+}
+
+Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p) {
+  if (fov.depth.cols < 7 || fov.depth.rows < 7) return Eigen::Vector2d::Zero();
+  int const x = std::clamp(p.x, 3, fov.depth.cols - 4), y = std::clamp(p.y, 3, fov.depth.rows - 4);
+  return {fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
+          fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x)};
 }
 
 }  // namespace endo_guidance::core

@@ -149,41 +149,33 @@ Pair pairSides(std::vector<Ray> const& side0, std::vector<Ray> const& side1, cv:
         }
         if (!inward) continue;
       }
+      // Inside: mostly shaft-like (at or below the level), and its median well below the tissue's
+      // just outside each side (a side against the FOV edge has no outside samples: not tested).
       int low = 0, all = 0;
+      std::vector<int> in, o0, o1;
+      auto add = [&](Eigen::Vector2d const& q, std::vector<int>& v, bool interior) {
+        int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+        if (x < 0 || y < 0 || x >= feature.cols || y >= feature.rows) return;
+        int const f = feature.at<std::uint8_t>(y, x);
+        if (interior) {
+          ++all;
+          low += f <= level;
+        }
+        if (fov.mask.at<std::uint8_t>(y, x)) v.push_back(f);
+      };
       for (double t = 1.0; t <= lmin; t += 2.0) {
         Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;
-        for (double f : {0.25, 0.5, 0.75}) {
-          Eigen::Vector2d const q = qa + f * (qb - qa);
-          int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-          if (x < 0 || y < 0 || x >= feature.cols || y >= feature.rows) continue;
-          ++all;
-          low += feature.at<std::uint8_t>(y, x) <= level;
-        }
+        double const d = std::max(3.0, 0.3 * (qb - qa).norm());
+        for (double f : {0.25, 0.5, 0.75}) add(qa + f * (qb - qa), in, true);
+        add(qa + d * a.out, o0, false);
+        add(qb + d * b.out, o1, false);
       }
-      if (all == 0 || low < p.min_inside_low * all) continue;
-      // Contrast: the strip's median feature well below the tissue's just outside each side
-      // (a side against the FOV edge has no outside samples and is not tested).
-      {
-        std::vector<int> in, o0, o1;
-        for (double t = 1.0; t <= lmin; t += 2.0) {
-          Eigen::Vector2d const qa = a.start + t * a.dir, qb = b.start + t * b.dir;
-          double const d = std::max(3.0, 0.3 * (qb - qa).norm());
-          auto add = [&](Eigen::Vector2d const& q, std::vector<int>& v) {
-            int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-            if (x >= 0 && y >= 0 && x < feature.cols && y < feature.rows && fov.mask.at<std::uint8_t>(y, x))
-              v.push_back(feature.at<std::uint8_t>(y, x));
-          };
-          for (double f : {0.25, 0.5, 0.75}) add(qa + f * (qb - qa), in);
-          add(qa + d * a.out, o0);
-          add(qb + d * b.out, o1);
-        }
-        if (in.empty()) continue;
-        double const mi = median(in);
-        bool contrast = true;
-        for (auto* o : {&o0, &o1})
-          if (o->size() >= 4) contrast = contrast && mi <= p.max_inside_outside_ratio * median(*o);
-        if (!contrast) continue;
-      }
+      if (all == 0 || low < p.min_inside_low * all || in.empty()) continue;
+      double const mi = median(in);
+      bool contrast = true;
+      for (auto* o : {&o0, &o1})
+        if (o->size() >= 4) contrast = contrast && mi <= p.max_inside_outside_ratio * median(*o);
+      if (!contrast) continue;
       best.score = a.score + b.score;
       best.a = a;
       best.b = b;
@@ -206,13 +198,8 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
   Eigen::Vector2d const pb(B[ib].x, B[ib].y), pe(B[ie].x, B[ie].y);
   if ((pb - pe).norm() < 2.0) return std::nullopt;
   // Inward normal at the seed: the gradient of the distance to the FOV edge, else toward the centre.
-  Eigen::Vector2d inward(fov.centre.x - seed.position.x, fov.centre.y - seed.position.y);
-  if (!fov.depth.empty()) {
-    int const x = std::clamp(seed.position.x, 3, fov.depth.cols - 4), y = std::clamp(seed.position.y, 3, fov.depth.rows - 4);
-    Eigen::Vector2d const g(fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
-                            fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x));
-    if (g.norm() > 1e-6) inward = g;
-  }
+  Eigen::Vector2d inward = depthGradient(fov, seed.position);
+  if (inward.norm() <= 1e-6) inward = Eigen::Vector2d(fov.centre.x - seed.position.x, fov.centre.y - seed.position.y);
   if (inward.norm() < 1e-9) return std::nullopt;
   inward.normalize();
   // Sides start on the run (plus the slack; a run can extend beyond the shaft along a dark rim):

@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #pragma once
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -28,5 +29,9 @@ struct FieldOfView {
 /// Detects the field of view on a (possibly down-scaled) BGR image. The area is the convex hull
 /// of the largest lit region, so dark shafts crossing the border do not notch it.
 FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& params = {});
+
+/// The inward direction at pixel p (clamped 3 px inside the image): the central difference of
+/// `depth` over +-3 px, unnormalised; zero where the depth is flat or unknown.
+Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p);
 
 }  // namespace endo_guidance::core
