@@ -2,6 +2,7 @@
 #include "endo_guidance/core/segmentation.h"
 
 #include <cstdint>
+#include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
@@ -80,7 +81,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // best ones in full until one is accepted. In a video, a seed near last frame's entry of a
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
     // seed near last frame's rejected region only re-grows that region (to claim it) and is
-    // searched in full again every `full_search_every` frames.
+    // searched in full again every `full_search_every` frames (its strip search: stripSearchDue()).
     // Growth levels: the absolute thresholds, capped between the seed's and the tissue's levels.
     std::vector<int> T = params_.regions.thresholds;
     auto const& fr = params_.regions.background_fractions;
@@ -90,7 +91,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         int const rel = static_cast<int>(std::lround(seed.mean_value + fr[i] * (seed.background - seed.mean_value)));
         T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
       }
-    Memory const* mem = remembered(seed.position);
+    Memory const* mem = remembered(seed);
     if (mem && !mem->accepted && mem->age + 1 < params_.full_search_every) {
       // (a seed whose regions all leaked has none to claim)
       if (auto r = mem->grown ? grower_.grow(seed.position, T[mem->level], si) : std::nullopt) {
@@ -98,7 +99,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         res.region_status.push_back(mem->why);
         grower_.claim(*r, 255);
       }
-      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1, std::nullopt, mem->grown});
+      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1, mem->strip_age + 1, mem->strip_fails,
+                            seed.width, std::nullopt, mem->grown});
       continue;
     }
     std::optional<Region> best;
@@ -138,60 +140,75 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     };
     // A shaft found by the strip search in the last frame: searched about its sides first.
     if (mem && mem->accepted && mem->strip && params_.strip.enabled) tryStrip(&*mem->strip);
-    std::vector<int> levels;  // none when the tracked strip was found again
-    if (!best && mem && mem->accepted) {
-      for (int d : {0, -1, 1})
-        if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) levels.push_back(mem->level + d);
-    } else if (!best) {
-      for (int i = 0; i < static_cast<int>(T.size()); ++i) levels.push_back(i);
-    }
     struct Candidate {
       Region region;
       SideFit sides;
       double score;
       int level;
     };
-    std::vector<Candidate> cands;
     std::optional<Region> smallest;
     int smallest_level = 0;
-    for (int li : levels) {
-      auto r = grower_.grow(seed.position, T[li], si);
-      if (!r) continue;
-      if (r->area > max_area) {
-        if (!mem) break;  // leaked into tissue: higher thresholds only leak more
-        continue;
+    // Grows at the given levels, scores each region's side pair, refines the best in full.
+    // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
+    auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
+      std::vector<Candidate> cands;
+      for (int li : levels) {
+        auto r = grower_.grow(seed.position, T[li], si);
+        if (!r) continue;
+        if (r->area > max_area) {
+          // Leaked into tissue: in a full search (levels ascending) higher thresholds only leak more.
+          if (!tracked) break;
+          continue;
+        }
+        if (!smallest || r->area < smallest->area) {
+          smallest = r;
+          smallest_level = li;
+        }
+        if (r->area < params_.regions.min_area) continue;
+        SideFit sf = fitSides(*r, fov_, scale, params_.contours);
+        double const score = scoreSides(sf, bgr, params_.contours);
+        if (score < 0.0) {
+          why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
+          continue;
+        }
+        cands.push_back({std::move(*r), std::move(sf), score, li});
+        if (tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
       }
-      if (!smallest || r->area < smallest->area) {
-        smallest = r;
-        smallest_level = li;
+      std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
+      for (auto& cd : cands) {
+        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
+        if (f.contour) {
+          best = std::move(cd.region);
+          best_fit = std::move(f);
+          best_level = cd.level;
+          best_score = cd.score;
+          return;
+        }
+        why = f.rejection;
       }
-      if (r->area < params_.regions.min_area) continue;
-      SideFit sf = fitSides(*r, fov_, scale, params_.contours);
-      double const score = scoreSides(sf, bgr, params_.contours);
-      if (score < 0.0) {
-        why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
-        continue;
-      }
-      cands.push_back({std::move(*r), std::move(sf), score, li});
-      if (mem && mem->accepted && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
-    }
-    std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
-    for (auto& cd : cands) {
-      ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
-      if (f.contour) {
-        best = std::move(cd.region);
-        best_fit = std::move(f);
-        best_level = cd.level;
-        best_score = cd.score;
-        break;
-      }
-      why = f.rejection;
+    };
+    std::vector<int> all(T.size());
+    std::iota(all.begin(), all.end(), 0);
+    if (!best && mem && mem->accepted) {
+      std::vector<int> near;
+      for (int d : {0, -1, 1})
+        if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) near.push_back(mem->level + d);
+      tryLevels(near, true);
+      // Lost about last frame's level: the full search now, not `full_search_every` frames later.
+      if (!best) tryLevels(all, false);
+    } else if (!best) {
+      tryLevels(all, false);
     }
     // The region leaked or split at every level: search the shaft's sides from the seed directly
     // in the feature's gradient (strip_search.h), once per seed.
-    if (!best && params_.strip.enabled) tryStrip(nullptr);
-    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, best_strip});
-    else memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, std::nullopt, smallest.has_value()});
+    bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed);
+    if (strip_run) tryStrip(nullptr);
+    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
+    else {
+      int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
+      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, strip_run ? 0 : age + 1,
+                            strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
+    }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;
     res.regions.push_back(*keep);
@@ -224,10 +241,31 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   return res;
 }
 
-InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(cv::Point const& seed) const {
-  for (auto const& m : memory_)
-    if (std::abs(m.entry.x - seed.x) + std::abs(m.entry.y - seed.y) <= params_.level_memory_px) return &m;
-  return nullptr;
+// The memory of the nearest of last frame's seeds within level_memory_px. (Matching anywhere
+// within half the border run cost 3 % recall on the robotic sequences: a seed then inherits a
+// neighbour's level.)
+InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& seed) const {
+  Memory const* best = nullptr;
+  int best_d = 0;
+  for (auto const& m : memory_) {
+    int const d = std::abs(m.entry.x - seed.position.x) + std::abs(m.entry.y - seed.position.y);
+    if (d <= params_.level_memory_px && (!best || d < best_d)) {
+      best = &m;
+      best_d = d;
+    }
+  }
+  return best;
+}
+
+// The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
+// frame) runs at its full searches, but the interval doubles per failure up to
+// strip_search_max_every frames. Always for a new seed, a lost shaft, or a run that changed width.
+bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed) const {
+  if (!m || m->accepted || m->strip_fails == 0) return true;
+  if (std::abs(seed.width - m->width) * 4 > std::max(seed.width, m->width)) return true;  // its run changed: something entered
+  int every = std::max(1, params_.full_search_every);
+  for (int k = 1; k < m->strip_fails && every < params_.strip_search_max_every; ++k) every *= 2;
+  return m->strip_age + 1 >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <opencv2/imgproc.hpp>
 
+#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/segmentation.h"
 
@@ -78,4 +80,33 @@ TEST(Segmentation, RejectsBadInput) {
   EXPECT_THROW(seg.process(cv::Mat(10, 10, CV_8U)), cv::Exception);
   // A plain tissue image: no shaft.
   EXPECT_TRUE(seg.process(cv::Mat(240, 320, CV_8UC3, cv::Scalar(60, 70, 170))).contours.empty());
+}
+
+// A tracked shaft whose feature level jumps between two frames (a change of light or of the
+// tissue it mirrors) is searched at every growth level in that same frame, not lost until the
+// next full search. (The strip search is off here: it would find the shaft on its own.)
+TEST(Segmentation, TrackedShaftFoundAgainWhenItsLevelJumps) {
+  SegmentationParams p;
+  p.strip.enabled = false;
+  InstrumentSegmenter seg(p);
+  ColourFeature const cf(p.feature);
+  cv::Scalar const tissue(60, 70, 170);
+  // A grey with a blue tint whose feature lies between the 3rd and 4th growth levels.
+  double const target = 0.5 * (p.regions.thresholds[2] + p.regions.thresholds[3]);
+  cv::Scalar tinted(100, 100, 100);
+  for (int t = 0; t < 120; ++t) {
+    tinted = cv::Scalar(100 + t, 100, 100 - t / 2);
+    if (cf.exact(static_cast<float>(tinted[0]), static_cast<float>(tinted[1]), static_cast<float>(tinted[2])) >= target) break;
+  }
+  ASSERT_GE(cf.exact(static_cast<float>(tinted[0]), static_cast<float>(tinted[1]), static_cast<float>(tinted[2])),
+            p.regions.thresholds[2] + 2);
+  auto frame = [&](cv::Scalar const& shaft) {
+    cv::Mat im(480, 640, CV_8UC3, tissue);
+    std::vector<cv::Point> bar{{280, 479}, {340, 479}, {350, 200}, {300, 200}};
+    cv::fillConvexPoly(im, bar, shaft, cv::LINE_AA);
+    return im;
+  };
+  for (int k = 0; k < 3; ++k) ASSERT_EQ(seg.process(frame(cv::Scalar(100, 100, 100))).contours.size(), 1u) << k;
+  EXPECT_EQ(seg.process(frame(tinted)).contours.size(), 1u);
+  EXPECT_EQ(seg.process(frame(tinted)).contours.size(), 1u);
 }

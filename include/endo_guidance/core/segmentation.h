@@ -23,7 +23,9 @@ struct SegmentationParams {
   int sigma_delta = 10;           ///< Sigma filter range (feature units)
   int fov_refresh = 25;           ///< frames between field-of-view detections (it rarely changes)
   int level_memory_px = 8;        ///< processing px: a seed this close to last frame's entry reuses its level
-  int full_search_every = 5;      ///< frames: a rejected seed is searched in full again this often
+  int full_search_every = 5;      ///< frames: a rejected seed is searched in full again this often, but
+  int strip_search_max_every = 15; ///< its strip search (the costliest step) less and less often: the
+                                   ///< interval doubles, up to this, while the strip search keeps failing
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
@@ -74,10 +76,14 @@ class InstrumentSegmenter {
     bool accepted = false;
     ContourRejection why = ContourRejection::kNone;
     int age = 0;            // frames since its last full search
+    int strip_age = 0;      // frames since its last strip search
+    int strip_fails = 0;    // consecutive strip searches that gave no shaft
+    int width = 0;          // border points of its run
     std::optional<StripCandidate> strip;  // the strip it was found as (strip search), if so
     bool grown = true;      // a region was kept (false: every level leaked)
   };
-  Memory const* remembered(cv::Point const& seed) const;
+  Memory const* remembered(Seed const& seed) const;
+  bool stripSearchDue(Memory const* m, Seed const& seed) const;
   RegionGrower grower_;
   std::vector<Memory> memory_;
   cv::Mat small_, raw_, filtered_, labels_, gx_, gy_;
