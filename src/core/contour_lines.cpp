@@ -103,6 +103,24 @@ bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value =
   return true;
 }
 
+// The chroma at a + i d, i = 0..count-1, bilinear, all inside the image (chromaAt() without the
+// bounds test and the brightness: the inner loop of the sub-pixel refinement).
+void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out) {
+  std::size_t const stride = bgr.step[0];
+  std::uint8_t const* const data = bgr.data;
+  for (int i = 0; i < count; ++i) {
+    double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
+    int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+    float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+    std::uint8_t const* p0 = data + y0 * stride + 3 * x0;
+    std::uint8_t const* p1 = p0 + stride;
+    float c[3];
+    for (int k = 0; k < 3; ++k)
+      c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
+    out[i] = ColourFeature::chroma(c[0], c[1], c[2]);
+  }
+}
+
 // Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft
 // at the end): the centroid of the slope in a fixed window of +-2.5 px about its peak -- exact
 // for a box-filtered (anti-aliased) step under bilinear sampling and unbiased for any symmetric
@@ -185,20 +203,29 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
   int const ns = static_cast<int>(std::lround(2.0 * h / ds)) + 1;
   std::vector<float> prof(static_cast<std::size_t>(ns)), val(static_cast<std::size_t>(ns));
   std::vector<Eigen::Vector2d> pts;
+  bool const need_value = p.brightness_fallback_contrast > 0.0;
+  double const xmax = bgr.cols - 1, ymax = bgr.rows - 1;
   for (double t = t0; t <= t1; t += p.refine_step_px) {
     Eigen::Vector2d const base = o + t * dir;
-    bool ok = true;
-    for (int i = 0; i < ns && ok; ++i) {
-      Eigen::Vector2d const q = base + (-h + i * ds) * n;
-      ok = chromaAt(bgr, q.x(), q.y(), &prof[i], &val[i]);
+    // The profile lies inside the image if both its ends do (chromaAt's bounds).
+    Eigen::Vector2d const a = base - h * n, b = base + (-h + (ns - 1) * ds) * n;
+    if (!(std::min(a.x(), b.x()) >= 0.0 && std::min(a.y(), b.y()) >= 0.0 && std::max(a.x(), b.x()) < xmax &&
+          std::max(a.y(), b.y()) < ymax))
+      continue;
+    if (need_value) {
+      for (int i = 0; i < ns; ++i) {
+        Eigen::Vector2d const q = base + (-h + i * ds) * n;
+        chromaAt(bgr, q.x(), q.y(), &prof[i], &val[i]);
+      }
+    } else {
+      sampleChroma(bgr, a, ds * n, ns, prof.data());
     }
-    if (!ok) continue;
     // The edge is located in chroma, where the shaded rim of a grey shaft does not bias it (metal
     // mirrors tissue colours, so it is the steepest descent, not the first seen from inside --
     // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
     // little chroma contrast: then its drop in brightness is used.
     auto at = steepestDescent(prof, ds, p.min_edge_contrast * 2.0 * ds);
-    if (!at && p.brightness_fallback_contrast > 0.0) at = steepestDescent(val, ds, p.brightness_fallback_contrast * 2.0 * ds);
+    if (!at && need_value) at = steepestDescent(val, ds, p.brightness_fallback_contrast * 2.0 * ds);
     if (!at) continue;
     double const s = -h + *at * ds;
     pts.push_back(base + s * n);
