@@ -169,10 +169,13 @@ std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, 
     if (len < 2.0) continue;
     Eigen::Vector2d const nrm(-d.y() / len, d.x() / len);
     double const c = -nrm.dot(pts[i]);
+    int below = 0;  // residuals under the best median so far: at most k, and this line cannot beat it
     for (int m = 0; m < n; ++m) {
       double const e = nrm.dot(pts[m]) + c;
       r[m] = e * e;
+      below += r[m] < best;
     }
+    if (below <= k) continue;
     std::nth_element(r.begin(), r.begin() + k, r.end());
     if (r[k] < best) {
       best = r[k];
