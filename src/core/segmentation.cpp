@@ -231,6 +231,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
     if (best) {
       ApparentContour c = *best_fit.contour;
+      ImageLine const ax = imageAxis(c);
+      c.entry_px = footOnLine(ax, c.entry_px);
+      c.tip_px = footOnLine(ax, c.tip_px);
       c.insertion_point_id = seed.insertion_point;
       res.contours.push_back(c);
       res.edges.push_back(best_fit.edges);

@@ -110,3 +110,31 @@ TEST(Segmentation, TrackedShaftFoundAgainWhenItsLevelJumps) {
   EXPECT_EQ(seg.process(frame(tinted)).contours.size(), 1u);
   EXPECT_EQ(seg.process(frame(tinted)).contours.size(), 1u);
 }
+
+// A shaft crossing the border obliquely: its border run (and the seed, its middle) is off the
+// axis, and the farthest region point is a corner of the end; entry and tip are reported on the
+// image axis (the bisector of the contour lines).
+TEST(Segmentation, EntryAndTipOnTheImageAxis) {
+  cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+  Eigen::Vector2d const a(60.0, 540.0), b(470.0, 300.0);
+  Eigen::Vector2d const d = (b - a).normalized(), n(-d.y(), d.x());
+  std::vector<cv::Point> bar;
+  for (Eigen::Vector2d const& q : {Eigen::Vector2d(a + 16 * n), Eigen::Vector2d(b + 16 * n), Eigen::Vector2d(b - 16 * n),
+                                   Eigen::Vector2d(a - 16 * n)})
+    bar.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
+  cv::fillConvexPoly(im, bar, cv::Scalar(110, 110, 110), cv::LINE_AA);
+  InstrumentSegmenter seg;
+  auto const res = seg.process(im);
+  ASSERT_EQ(res.contours.size(), 1u);
+  auto const& c = res.contours[0];
+  ImageLine const ax = imageAxis(c);
+  ImageLine const truth = *lineThrough(a, b);
+  for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px}) {
+    EXPECT_LT(std::abs(ax.dot(q.homogeneous())), 1e-9);
+    EXPECT_LT(std::abs(truth.dot(q.homogeneous())), 1.0) << q.transpose();
+  }
+  Eigen::Vector2d const exit = a + (479.0 - a.y()) / d.y() * d;  // where the axis leaves the image
+  // (the border of the reduced image lies a few pixels inside, the axis meets it at 30 deg)
+  EXPECT_LT((c.entry_px - exit).norm(), 16.0) << c.entry_px.transpose();
+  EXPECT_LT((c.tip_px - b).norm(), 6.0) << c.tip_px.transpose();  // the end of the bar
+}
