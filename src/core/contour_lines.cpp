@@ -480,10 +480,28 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   }
   // A shaft enters the view across its border: its direction (entry -> tip) must point inward,
   // not along the border (the inward normal is the gradient of the distance to the FOV edge).
+  // The normal is taken where the axis itself leaves the view: near a corner the seed can lie on
+  // the other border than the one the shaft crosses (a shaft entering from the side close to
+  // the bottom seeds on the bottom). The exit is searched within two widths of the entry, so a
+  // band along the border (vignetted rim) still meets the border it runs along.
   {
-    Eigen::Vector2d const ps = (entry - Eigen::Vector2d(off, off)) / scale;
+    Eigen::Vector3d const em(entry.x(), entry.y(), 1.0);
+    double const w_proc = std::max(1.0, (c.lines[0].dot(em) + c.lines[1].dot(em)) / scale);
+    auto const ax = footOnLine(imageAxis(c), entry);
+    Eigen::Vector2d q = (ax - Eigen::Vector2d(off, off)) / scale;
+    auto inside = [&](Eigen::Vector2d const& x) {
+      int const u = static_cast<int>(std::lround(x.x())), v = static_cast<int>(std::lround(x.y()));
+      return u >= 0 && v >= 0 && u < fov.mask.cols && v < fov.mask.rows && fov.mask.at<std::uint8_t>(v, u) != 0;
+    };
+    int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
+    if (!inside(q)) {
+      for (int k = 0; k < kmax && !inside(q); ++k) q += axis_dir;  // into the view
+    } else {
+      for (int k = 0; k < kmax && inside(q - axis_dir); ++k) q -= axis_dir;  // out to the border
+    }
+    if (!inside(q)) q = (entry - Eigen::Vector2d(off, off)) / scale;  // no exit found: the seed
     Eigen::Vector2d const g =
-        depthGradient(fov, cv::Point(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y()))));
+        depthGradient(fov, cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))));
     if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);
   }
   // Shape: a shaft region fills the strip between its lines and stays inside it, and the strip

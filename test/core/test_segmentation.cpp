@@ -138,3 +138,25 @@ TEST(Segmentation, EntryAndTipOnTheImageAxis) {
   EXPECT_LT((c.entry_px - exit).norm(), 16.0) << c.entry_px.transpose();
   EXPECT_LT((c.tip_px - b).norm(), 6.0) << c.tip_px.transpose();  // the end of the bar
 }
+
+// A shaft entering through the side of the view close to a corner, at a shallow angle to the
+// bottom: its border run (the seed) lies on the bottom, but its axis leaves the view through the
+// side, which it crosses steeply: it is a shaft, not a band along the border.
+TEST(Segmentation, ShaftEnteringNearACorner) {
+  cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+  Eigen::Vector2d const a(700.0, 470.0), b(250.0, 432.0);  // 4.8 deg to the bottom
+  Eigen::Vector2d const d = (b - a).normalized(), n(-d.y(), d.x());
+  std::vector<cv::Point> bar;
+  for (Eigen::Vector2d const& q : {Eigen::Vector2d(a + 16 * n), Eigen::Vector2d(b + 16 * n), Eigen::Vector2d(b - 16 * n),
+                                   Eigen::Vector2d(a - 16 * n)})
+    bar.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
+  cv::fillConvexPoly(im, bar, cv::Scalar(110, 110, 110), cv::LINE_AA);
+  InstrumentSegmenter seg;
+  auto const res = seg.process(im);
+  ASSERT_FALSE(res.seeds.empty());
+  std::printf("seed (%d, %d) at processing scale\n", res.seeds[0].position.x, res.seeds[0].position.y);
+  ASSERT_EQ(res.contours.size(), 1u);
+  ImageLine const truth = *lineThrough(a, b);
+  for (Eigen::Vector2d const& q : {res.contours[0].entry_px, res.contours[0].tip_px})
+    EXPECT_LT(std::abs(truth.dot(q.homogeneous())), 1.0) << q.transpose();
+}
