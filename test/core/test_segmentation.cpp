@@ -53,6 +53,18 @@ Stats run(RenderOptions const& ro, int frames) {
   std::sort(s.err.begin(), s.err.end());
   return s;
 }
+
+// A grey bar 32 px wide along a -> b (either end may lie outside) on plain red tissue, 640x480.
+cv::Mat greyBarOnTissue(Eigen::Vector2d const& a, Eigen::Vector2d const& b) {
+  cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+  Eigen::Vector2d const d = (b - a).normalized(), n(-d.y(), d.x());
+  std::vector<cv::Point> bar;
+  for (Eigen::Vector2d const& q : {Eigen::Vector2d(a + 16 * n), Eigen::Vector2d(b + 16 * n), Eigen::Vector2d(b - 16 * n),
+                                   Eigen::Vector2d(a - 16 * n)})
+    bar.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
+  cv::fillConvexPoly(im, bar, cv::Scalar(110, 110, 110), cv::LINE_AA);
+  return im;
+}
 }  // namespace
 
 TEST(Segmentation, CleanSceneRegression) {
@@ -115,14 +127,9 @@ TEST(Segmentation, TrackedShaftFoundAgainWhenItsLevelJumps) {
 // axis, and the farthest region point is a corner of the end; entry and tip are reported on the
 // image axis (the bisector of the contour lines).
 TEST(Segmentation, EntryAndTipOnTheImageAxis) {
-  cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
   Eigen::Vector2d const a(60.0, 540.0), b(470.0, 300.0);
-  Eigen::Vector2d const d = (b - a).normalized(), n(-d.y(), d.x());
-  std::vector<cv::Point> bar;
-  for (Eigen::Vector2d const& q : {Eigen::Vector2d(a + 16 * n), Eigen::Vector2d(b + 16 * n), Eigen::Vector2d(b - 16 * n),
-                                   Eigen::Vector2d(a - 16 * n)})
-    bar.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
-  cv::fillConvexPoly(im, bar, cv::Scalar(110, 110, 110), cv::LINE_AA);
+  Eigen::Vector2d const d = (b - a).normalized();
+  cv::Mat const im = greyBarOnTissue(a, b);
   InstrumentSegmenter seg;
   auto const res = seg.process(im);
   ASSERT_EQ(res.contours.size(), 1u);
@@ -143,14 +150,8 @@ TEST(Segmentation, EntryAndTipOnTheImageAxis) {
 // bottom: its border run (the seed) lies on the bottom, but its axis leaves the view through the
 // side, which it crosses steeply: it is a shaft, not a band along the border.
 TEST(Segmentation, ShaftEnteringNearACorner) {
-  cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
   Eigen::Vector2d const a(700.0, 470.0), b(250.0, 432.0);  // 4.8 deg to the bottom
-  Eigen::Vector2d const d = (b - a).normalized(), n(-d.y(), d.x());
-  std::vector<cv::Point> bar;
-  for (Eigen::Vector2d const& q : {Eigen::Vector2d(a + 16 * n), Eigen::Vector2d(b + 16 * n), Eigen::Vector2d(b - 16 * n),
-                                   Eigen::Vector2d(a - 16 * n)})
-    bar.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
-  cv::fillConvexPoly(im, bar, cv::Scalar(110, 110, 110), cv::LINE_AA);
+  cv::Mat const im = greyBarOnTissue(a, b);
   InstrumentSegmenter seg;
   auto const res = seg.process(im);
   ASSERT_FALSE(res.seeds.empty());
