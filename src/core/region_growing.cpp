@@ -19,10 +19,11 @@ std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed
   if (seed.x < 0 || seed.y < 0 || seed.x >= feature_.cols || seed.y >= feature_.rows) return std::nullopt;
   int const v = feature_.at<std::uint8_t>(seed);
   if (v > threshold || claimed(seed)) return std::nullopt;
-  base_.copyTo(scratch_);
   cv::Rect box;
-  // Fixed range [0, threshold] around the seed value: loDiff = v, upDiff = threshold - v.
-  int const area = cv::floodFill(feature_, scratch_, seed, 255, &box, cv::Scalar(v), cv::Scalar(threshold - v),
+  // Fixed range [0, threshold] around the seed value: loDiff = v, upDiff = threshold - v. Filled
+  // into the claim mask itself (value 2), read back and cleared within the region's box only:
+  // no copy of the whole mask per growth.
+  int const area = cv::floodFill(feature_, base_, seed, 255, &box, cv::Scalar(v), cv::Scalar(threshold - v),
                                  4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
   Region r;
   r.seed_index = seed_index;
@@ -30,7 +31,9 @@ std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed
   r.seed = seed;
   r.box = box;
   r.area = area;
-  cv::Mat const roi = scratch_(cv::Rect(box.x + 1, box.y + 1, box.width, box.height)) == 2;
+  cv::Mat m = base_(cv::Rect(box.x + 1, box.y + 1, box.width, box.height));
+  cv::Mat const roi = m == 2;
+  m.setTo(0, roi);
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(roi, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, box.tl());
   if (contours.empty()) return std::nullopt;
@@ -42,22 +45,28 @@ std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed
 }
 
 void RegionGrower::claim(Region const& r, int label, std::vector<cv::Point> const& polygon) {
-  // Re-grow into the scratch mask to mark exactly this region.
-  base_.copyTo(scratch_);
+  // Re-grow into the mask (value 2) to mark exactly this region, then, within its box: claimed
+  // (1) inside the polygon, free again (0) outside it.
   int const v = feature_.at<std::uint8_t>(r.seed);
   cv::Rect box;
-  cv::floodFill(feature_, scratch_, r.seed, 255, &box, cv::Scalar(v), cv::Scalar(std::max(0, r.threshold - v)),
-                4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
-  cv::Mat in = scratch_ == 2;
-  if (!polygon.empty()) {
-    cv::Mat poly = cv::Mat::zeros(in.size(), CV_8U);
+  int const n = cv::floodFill(feature_, base_, r.seed, 255, &box, cv::Scalar(v), cv::Scalar(std::max(0, r.threshold - v)),
+                              4 | (2 << 8) | cv::FLOODFILL_MASK_ONLY | cv::FLOODFILL_FIXED_RANGE);
+  if (n <= 0 || box.empty()) return;
+  cv::Mat m = base_(cv::Rect(box.x + 1, box.y + 1, box.width, box.height));
+  cv::Mat const filled = m == 2;
+  cv::Mat in;  // (not a header of `filled`: assigning an expression to it would overwrite `filled`)
+  if (polygon.empty()) {
+    in = filled;
+  } else {
+    cv::Mat poly = cv::Mat::zeros(box.size(), CV_8U);
     std::vector<cv::Point> shifted;
-    for (auto const& q : polygon) shifted.push_back(q + cv::Point(1, 1));
+    for (auto const& q : polygon) shifted.push_back(q - box.tl());
     cv::fillConvexPoly(poly, shifted, 255);
-    in &= poly;
+    cv::bitwise_and(filled, poly, in);
   }
-  base_.setTo(1, in);
-  labels_.setTo(label, in(cv::Rect(1, 1, feature_.cols, feature_.rows)));
+  m.setTo(0, filled);
+  m.setTo(1, in);
+  labels_(box).setTo(label, in);
 }
 
 }  // namespace endo_guidance::core

@@ -54,7 +54,6 @@ class RegionGrower {
  private:
   cv::Mat feature_;
   cv::Mat base_;     // (rows+2)x(cols+2): 1 outside the FOV and on claimed regions
-  cv::Mat scratch_;
   cv::Mat labels_;
 };
 
