@@ -7,18 +7,29 @@
 namespace endo_guidance::core {
 
 namespace {
+// Unit directions, seen from the FOV centre c, of the trocar images (zero: none).
+std::vector<Eigen::Vector2d> trocarDirections(cv::Point2f const& c, std::vector<Eigen::Vector3d> const& t) {
+  std::vector<Eigen::Vector2d> dirs;
+  for (auto const& tj : t) {
+    Eigen::Vector2d dir;
+    if (std::abs(tj.z()) > 1e-12) dir = tj.head<2>() / tj.z() - Eigen::Vector2d(c.x, c.y);
+    else dir = tj.head<2>();  // at infinity: its direction
+    dirs.push_back(dir.norm() < 1e-9 ? Eigen::Vector2d::Zero() : Eigen::Vector2d(dir.normalized()));
+  }
+  return dirs;
+}
+
 // Index of the trocar image whose direction from the FOV centre is within the arc of p, or -1.
-int facingTrocar(cv::Point const& p, cv::Point2f const& c, std::vector<Eigen::Vector3d> const& t, double cos_max) {
-  Eigen::Vector2d const v(p.x - c.x, p.y - c.y);
-  if (v.norm() < 1e-9) return -1;
+int facingTrocar(cv::Point const& p, cv::Point2f const& c, std::vector<Eigen::Vector2d> const& dirs, double cos_max) {
+  Eigen::Vector2d v(p.x - c.x, p.y - c.y);
+  double const vn = v.norm();
+  if (vn < 1e-9) return -1;
+  v /= vn;
   int best = -1;
   double bc = cos_max;
-  for (std::size_t j = 0; j < t.size(); ++j) {
-    Eigen::Vector2d dir;
-    if (std::abs(t[j].z()) > 1e-12) dir = t[j].head<2>() / t[j].z() - Eigen::Vector2d(c.x, c.y);
-    else dir = t[j].head<2>();  // at infinity: its direction
-    if (dir.norm() < 1e-9) continue;
-    double const cs = v.dot(dir) / (v.norm() * dir.norm());
+  for (std::size_t j = 0; j < dirs.size(); ++j) {
+    if (dirs[j].isZero()) continue;
+    double const cs = v.dot(dirs[j]);
     if (cs > bc) {
       bc = cs;
       best = static_cast<int>(j);
@@ -34,6 +45,7 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
   int const n = static_cast<int>(fov.border.size());
   if (n < 8) return seeds;
   double const cos_max = std::cos(p.near_angle_deg * M_PI / 180.0);
+  std::vector<Eigen::Vector2d> const dirs = trocarDirections(fov.centre, trocars);
   // Profile along the border, 3-tap smoothed; per-point threshold (relaxed near trocar arcs) and
   // relative to the local background: the upper quartile of the profile over a window of the border
   // (dark, vignetted tissue near the border is low in absolute terms; the shaft is lower still).
@@ -65,7 +77,7 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
     }
   }
   for (int i = 0; i < n; ++i) {
-    if (!trocars.empty()) facing[i] = facingTrocar(fov.border[i], fov.centre, trocars, cos_max);
+    if (!dirs.empty()) facing[i] = facingTrocar(fov.border[i], fov.centre, dirs, cos_max);
     float const abs_t = facing[i] >= 0 ? p.near_threshold : p.threshold;
     float thr = abs_t;
     // Where the border is dark (vignetting), relative to the local tissue level.
