@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // Console reporter that also prints every benchmark as a ratio to a reference benchmark measured
-// in the same run (speed is reported, never asserted: machines are noisy).
+// in the same run, or its own "ratio" counter when it times the reference itself, paired within
+// each iteration (speed is reported, never asserted: machines are noisy).
 #pragma once
 
 #include <benchmark/benchmark.h>
@@ -24,6 +25,8 @@ class RatioReporter : public benchmark::ConsoleReporter {
     for (auto const& r : runs) {
       times_.emplace_back(r.benchmark_name(), r.GetAdjustedRealTime());
       units_.push_back(benchmark::GetTimeUnitString(r.time_unit));
+      auto const it = r.counters.find("ratio");
+      paired_.push_back(it != r.counters.end() ? static_cast<double>(it->second) : -1.0);
     }
   }
   void Finalize() override {
@@ -31,6 +34,10 @@ class RatioReporter : public benchmark::ConsoleReporter {
     std::printf("\n%s\n", title_.c_str());
     for (std::size_t i = 0; i < times_.size(); ++i) {
       auto const& [n, t] = times_[i];
+      if (paired_[i] >= 0.0) {  // measured against the reference within its own iterations
+        std::printf("  %-45s %9.4f   (paired, each iteration)\n", n.c_str(), paired_[i]);
+        continue;
+      }
       std::string const ref = reference_of_(n);
       for (auto const& [m, tr] : times_)
         if (m == ref && tr > 0.0) std::printf("  %-45s %9.4f   (%.1f %s)\n", n.c_str(), t / tr, t, units_[i]);
@@ -42,6 +49,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
   std::function<std::string(std::string const&)> reference_of_;
   std::vector<std::pair<std::string, double>> times_;
   std::vector<char const*> units_;
+  std::vector<double> paired_;  ///< a benchmark's own "ratio" counter, -1 if none
 };
 
 /// main() of the benchmark programs: single thread, the reporter above.
