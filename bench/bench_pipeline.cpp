@@ -79,7 +79,7 @@ void BM_Pipeline(benchmark::State& st) {
 // The same, paired: every iteration converts the frame to HSV and runs the pipeline on it, each
 // timed apart, so that both see the same phase of a noisy machine; `ratio` is the sum of the
 // pipeline times over the sum of the HSV times (the figure the README quotes). The ratios of
-// separate benchmarks (above) moved by up to 40 % between runs here, the paired one by 1-2 % at SD.
+// separate benchmarks (above) moved by up to 40 % between runs here, the paired one by a few %.
 void BM_PipelinePairedWithHSV(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   Pipeline p(f.K, f.images[0].size());
