@@ -231,6 +231,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
     if (best) {
       ApparentContour c = *best_fit.contour;
+      // Reported on the image axis (the lines' bisector): the seed, the middle of the shaft's
+      // border run, is off the axis where the shaft crosses the border obliquely, at a corner or
+      // with its shadow, and the farthest region point can be a jaw's corner. (Only the report:
+      // the claim above and the checks keep the region's points.)
       ImageLine const ax = imageAxis(c);
       c.entry_px = footOnLine(ax, c.entry_px);
       c.tip_px = footOnLine(ax, c.tip_px);
@@ -244,9 +248,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   return res;
 }
 
-// The memory of the nearest of last frame's seeds within level_memory_px. (Matching anywhere
-// within half the border run cost 3 % recall on the robotic sequences: a seed then inherits a
-// neighbour's level.)
+// The memory of the nearest of last frame's seeds within level_memory_px. (Matching a tracked
+// shaft's memory anywhere within half the border run, or by run overlap, would spare a full
+// search when the middle of its run jumps, but cost 2-3 % recall on robotic Dataset 1.)
 InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& seed) const {
   Memory const* best = nullptr;
   int best_d = 0;

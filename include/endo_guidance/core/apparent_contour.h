@@ -24,8 +24,8 @@ struct ApparentContour {
   std::array<Eigen::Matrix3d, 2> line_covariances{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero()};
   std::array<double, 2> line_residual_px{0.0, 0.0};
   double residual_px = 0.0;
-  Eigen::Vector2d entry_px = Eigen::Vector2d::Zero();  ///< where the shaft crosses the FOV border
-  Eigen::Vector2d tip_px = Eigen::Vector2d::Zero();    ///< farthest shaft pixel from the entry
+  Eigen::Vector2d entry_px = Eigen::Vector2d::Zero();  ///< where the shaft crosses the FOV border (segmentation: on the image axis)
+  Eigen::Vector2d tip_px = Eigen::Vector2d::Zero();    ///< farthest shaft pixel from the entry (segmentation: on the image axis)
   int insertion_point_id = -1;
   int track_id = -1;
 };
