@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/core/segmentation.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
@@ -150,9 +151,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     int smallest_level = 0;
     // Grows at the given levels, scores each region's side pair, refines the best in full.
     // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
+    std::vector<int> tried;  // levels grown so far for this seed
     auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
       std::vector<Candidate> cands;
       for (int li : levels) {
+        tried.push_back(li);
         auto r = grower_.grow(seed.position, T[li], si);
         if (!r) continue;
         if (r->area > max_area) {
@@ -194,8 +197,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       for (int d : {0, -1, 1})
         if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) near.push_back(mem->level + d);
       tryLevels(near, true);
-      // Lost about last frame's level: the full search now, not `full_search_every` frames later.
-      if (!best) tryLevels(all, false);
+      // Lost about last frame's level: the full search now, not `full_search_every` frames later,
+      // over the levels not grown yet (those gave regions that were refused or leaked).
+      if (!best) {
+        std::vector<int> rest;
+        for (int li : all)
+          if (std::find(tried.begin(), tried.end(), li) == tried.end()) rest.push_back(li);
+        tryLevels(rest, false);
+      }
     } else if (!best) {
       tryLevels(all, false);
     }
