@@ -111,7 +111,7 @@ void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d 
   std::size_t const stride = bgr.step[0];
   std::uint8_t const* const data = bgr.data;
   // Four samples at a time: the pixel loads are scalar, the interpolation and the chroma run in
-  // 4-lane SIMD with the same operations, in the same order, as the scalar tail.
+  // 4-lane SIMD with the same operations, in the same order, as chromaAt() (the tail).
   int i = 0;
   alignas(16) float fxs[4], fys[4], q[4][3][4];  // q[corner][channel][lane]
   for (; i + 4 <= count; i += 4) {
@@ -136,17 +136,7 @@ void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d 
              fy * ((one - fx) * cv::v_load_aligned(q[2][k]) + fx * cv::v_load_aligned(q[3][k]));
     cv::v_store(out + i, cv::v_max(c[0], cv::v_max(c[1], c[2])) - cv::v_min(c[0], cv::v_min(c[1], c[2])));
   }
-  for (; i < count; ++i) {
-    double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
-    int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-    float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-    std::uint8_t const* p0 = data + y0 * stride + 3 * x0;
-    std::uint8_t const* p1 = p0 + stride;
-    float c[3];
-    for (int k = 0; k < 3; ++k)
-      c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
-    out[i] = ColourFeature::chroma(c[0], c[1], c[2]);
-  }
+  for (; i < count; ++i) chromaAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), &out[i]);
 }
 
 // Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft
