@@ -29,6 +29,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kNotFilled: return "region does not fill the strip between its lines";
     case ContourRejection::kAlongBorder: return "runs along the field-of-view border instead of into the view";
     case ContourRejection::kLowContrast: return "not less chromatic than the tissue beside it (full resolution)";
+    case ContourRejection::kWidthJump: return "tracked shaft's width changed too much since the last frame";
   }
   return "unknown";
 }
@@ -215,8 +216,8 @@ std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, 
   return out;
 }
 
-std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
-                                              ContourLinesParams const& p) {
+std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                               ContourLinesParams const& p) {
   Eigen::Vector2d const n = line.head<2>();   // toward the shaft
   Eigen::Vector2d const dir(-n.y(), n.x());
   Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
@@ -251,6 +252,13 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
     double const s = -h + *at * ds;
     pts.push_back(base + s * n);
   }
+  return pts;
+}
+
+std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& p) {
+  std::vector<Eigen::Vector2d> const pts = subpixelEdgePoints(bgr, line, t0, t1, p);
+  Eigen::Vector2d const n = line.head<2>();
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
   // Robust LS: Tukey biweight, scale from the MAD, three passes.
   std::vector<double> w(pts.size(), 1.0);

@@ -46,10 +46,52 @@ void InstrumentSegmenter::setParams(SegmentationParams const& p) {
   if (new_colour) colour_ = ColourFeature(p.feature);
   fov_size_ = cv::Size();  // re-detect
   memory_.clear();         // its levels index the old threshold list
+  tracked_.clear();
+  tracked_memory_.clear();
+}
+
+void InstrumentSegmenter::reset() {
+  fov_size_ = cv::Size();
+  memory_.clear();
+  tracked_.clear();
+  tracked_memory_.clear();
+  since_detection_ = 0;
+}
+
+std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr) {
+  if (tracked_.empty() || bgr.size() != tracked_size_ || since_detection_ + 1 >= params_.tracking.detect_every) return std::nullopt;
+  std::vector<TrackedShaft> now;
+  for (TrackedShaft const& t : tracked_) {
+    TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
+    // Lost, or no longer less chromatic than the tissue beside it: this is a detection frame.
+    if (!r.shaft || !stripContrastFullRes(bgr, r.shaft->contour, params_.strip)) return std::nullopt;
+    now.push_back(std::move(*r.shaft));
+  }
+  // The seeds' memory follows the shafts, so that the next detection frame finds each shaft's
+  // seed where its memory is (and tries its growth level first).
+  for (std::size_t i = 0; i < now.size(); ++i) {
+    std::size_t const m = tracked_memory_[i];
+    if (m >= memory_.size()) continue;
+    Eigen::Vector2d const shift = (now[i].contour.entry_px - tracked_[i].contour.entry_px) / scale_;
+    memory_[m].entry += cv::Point(static_cast<int>(std::lround(shift.x())), static_cast<int>(std::lround(shift.y())));
+  }
+  SegmentationResult res;
+  res.scale = scale_;
+  res.tracked = true;
+  for (TrackedShaft const& t : now) {
+    res.contours.push_back(t.contour);
+    res.edges.push_back(t.edges);
+  }
+  tracked_ = std::move(now);
+  ++since_detection_;
+  return res;
 }
 
 SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars) {
   CV_Assert(bgr.type() == CV_8UC3 && !bgr.empty());
+  if (auto t = track(bgr)) return std::move(*t);
+  // Frames since the last detection frame: the ages of the seed memory count frames.
+  int const elapsed = since_detection_ + 1;
   SegmentationResult res;
   int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
   res.scale = scale;
@@ -71,6 +113,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   for (auto const& t : trocars) t_small.emplace_back((t.x() - off * t.z()) / scale, (t.y() - off * t.z()) / scale, t.z());
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
+  std::vector<std::size_t> contour_memory;  // per accepted contour: its seed's entry in memory_now
   grower_.reset(filtered_, fov_);
   bool have_gradient = false;
   double const max_area = params_.regions.max_area_fraction * fov_area_;
@@ -93,14 +136,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
       }
     Memory const* mem = remembered(seed);
-    if (mem && !mem->accepted && mem->age + 1 < params_.full_search_every) {
+    if (mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
       // (a seed whose regions all leaked has none to claim)
       if (auto r = mem->grown ? grower_.grow(seed.position, T[mem->level], si) : std::nullopt) {
         res.regions.push_back(*r);
         res.region_status.push_back(mem->why);
         grower_.claim(*r, 255);
       }
-      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + 1, mem->strip_age + 1, mem->strip_fails,
+      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails,
                             seed.width, std::nullopt, mem->grown});
       continue;
     }
@@ -210,12 +253,12 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
     // The region leaked or split at every level: search the shaft's sides from the seed directly
     // in the feature's gradient (strip_search.h), once per seed.
-    bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed);
+    bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(nullptr);
     if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
     else {
       int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
-      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, strip_run ? 0 : age + 1,
+      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, strip_run ? 0 : age + elapsed,
                             strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
     }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
@@ -249,11 +292,23 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       c.tip_px = footOnLine(ax, c.tip_px);
       c.insertion_point_id = seed.insertion_point;
       res.contours.push_back(c);
+      contour_memory.push_back(memory_now.size() - 1);  // this seed's memory (pushed above)
       res.edges.push_back(best_fit.edges);
     }
   }
   labels_ = grower_.labels();
   memory_ = std::move(memory_now);
+  // The shafts found are followed in the next frames (contour_tracking.h).
+  tracked_.clear();
+  tracked_memory_.clear();
+  if (params_.tracking.detect_every > 1)
+    for (std::size_t i = 0; i < res.contours.size(); ++i) {
+      tracked_.push_back(startTrack(res.contours[i], res.edges[i], params_.tracking.max_gap_px));
+      tracked_memory_.push_back(contour_memory[i]);
+    }
+  tracked_size_ = bgr.size();
+  scale_ = scale;
+  since_detection_ = 0;
   return res;
 }
 
@@ -276,12 +331,12 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
 // The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
 // frame) runs at its full searches, but the interval doubles per failure up to
 // strip_search_max_every frames. Always for a new seed, a lost shaft, or a run that changed width.
-bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed) const {
+bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const {
   if (!m || m->accepted || m->strip_fails == 0) return true;
   if (std::abs(seed.width - m->width) * 4 > std::max(seed.width, m->width)) return true;  // its run changed: something entered
   int every = std::max(1, params_.full_search_every);
   for (int k = 1; k < m->strip_fails && every < params_.strip_search_max_every; ++k) every *= 2;
-  return m->strip_age + 1 >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));
+  return m->strip_age + elapsed >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {

@@ -296,6 +296,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             near = near || 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) +
                                   std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1)))) < 20.0;
           false_dets += !near;
+          if (verbose && !near)
+            std::printf("  false ds%d frame %d (%s): entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
+                        c.entry_px.x(), c.entry_px.y(), c.tip_px.x(), c.tip_px.y());
         }
         for (auto const& a : it->second) {
           ++n;
@@ -316,6 +319,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             ++found;
             dist.push_back(best);
             ang.push_back(ba);
+          } else if (verbose) {
+            std::printf("  miss ds%d frame %d (%s): annotated axis (%.0f %.0f)-(%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
+                        a.a.x(), a.a.y(), a.b.x(), a.b.y());
           }
         }
         if (!overlay_dir.empty() && frames_annot % 10 == 1) {

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/io/yaml_config.h"
 #include "tool_util.h"
 #include "endo_guidance/core/scene_renderer.h"
 
@@ -53,12 +54,11 @@ struct Result {
   std::vector<double> line_px, dir_deg, dist_rel, trocar_mm, latency_ms;
 };
 
-Result run(Scene const& s, int frames, bool overlay) {
+Result run(Scene const& s, int frames, bool overlay, PipelineParams const& pp) {
   SyntheticSceneOptions so;
   so.breathing_amplitude = s.breathing;
   SyntheticScene scene(defaultInstruments(), so);
   SceneRenderer renderer(so.width, so.height, s.render);
-  PipelineParams pp;
   Pipeline pipe(so.K, cv::Size(so.width, so.height), pp);
   Result R;
   for (int k = 0; k < frames; ++k) {
@@ -136,14 +136,27 @@ int main(int argc, char** argv) {
   int frames = 300;
   bool check = false, overlay = false;
   std::vector<std::string> only;
+  std::string params_path;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
     if (a == "--frames" && i + 1 < argc) frames = std::atoi(argv[++i]);
     else if (a == "--check") check = true;
     else if (a == "--overlay") overlay = true;
     else if (a == "--scene" && i + 1 < argc) only.push_back(argv[++i]);
+    else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
     else {
-      std::fprintf(stderr, "usage: endo_guidance_eval_synthetic [--frames N] [--scene clean|hard|black_circular]... [--overlay] [--check]\n");
+      std::fprintf(stderr,
+                   "usage: endo_guidance_eval_synthetic [--frames N] [--scene clean|hard|black_circular]... [--overlay] [--check]\n"
+                   "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset)\n");
+      return 2;
+    }
+  }
+  PipelineParams pp;
+  if (!params_path.empty()) {
+    try {
+      endo_guidance::io::loadPipelineYaml(params_path, pp);
+    } catch (std::exception const& e) {
+      std::fprintf(stderr, "endo_guidance_eval_synthetic: %s\n", e.what());
       return 2;
     }
   }
@@ -162,7 +175,7 @@ int main(int argc, char** argv) {
               "dir p50", "dist p50", "trocar", "late fp", "latency ms", "frames");
   for (auto const& s : scenes) {
     if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
-    Result const r = run(s, frames, overlay);
+    Result const r = run(s, frames, overlay, pp);
     double const found = 100.0 * r.found / std::max(1, r.visible);
     double const fpf = static_cast<double>(r.false_shafts) / std::max(1, r.frames);
     double const tro = percentile(r.trocar_mm, 1.0);

@@ -100,6 +100,7 @@ TEST(Segmentation, RejectsBadInput) {
 TEST(Segmentation, TrackedShaftFoundAgainWhenItsLevelJumps) {
   SegmentationParams p;
   p.strip.enabled = false;
+  p.tracking.detect_every = 1;  // every frame a detection frame: the seed memory is under test
   InstrumentSegmenter seg(p);
   ColourFeature const cf(p.feature);
   cv::Scalar const tissue(60, 70, 170);

@@ -49,7 +49,7 @@ struct ContourLinesParams {
 
 enum class ContourRejection {
   kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
-  kNotElongated, kNotFilled, kAlongBorder, kLowContrast
+  kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump
 };
 char const* toString(ContourRejection r);
 
@@ -75,6 +75,10 @@ struct RefinedLine {
 };
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& params);
+/// The sub-pixel edge points of refineLineSubpixel() alone (no line fit): one per profile that
+/// has an edge steeper than min_edge_contrast.
+std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                               ContourLinesParams const& params);
 
 /// [Doignon07] Sec. 3: the ordered region boundary is split in two classes at the boundary point
 /// farthest from the seed (points on the FOV border excluded), a line is fitted to each class

@@ -9,6 +9,7 @@
 #include "endo_guidance/core/apparent_contour.h"
 #include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/contour_lines.h"
+#include "endo_guidance/core/contour_tracking.h"
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/region_growing.h"
 #include "endo_guidance/core/seed_search.h"
@@ -32,6 +33,7 @@ struct SegmentationParams {
   RegionGrowingParams regions;
   ContourLinesParams contours;
   StripSearchParams strip;
+  ContourTrackingParams tracking;
 };
 
 /// What one frame gave, with the intermediate results for overlays and diagnostics.
@@ -43,12 +45,17 @@ struct SegmentationResult {
   std::vector<Region> regions;            ///< processing-scale pixels
   std::vector<ContourRejection> region_status;  ///< per region: kNone = accepted
   int scale = 1;                          ///< processing -> full resolution factor
+  /// The shafts were followed from the last frame's lines (contour_tracking.h), without the
+  /// detection: seeds and regions are empty then.
+  bool tracked = false;
 };
 
 /// Instrument segmentation, [Doignon07] Sec. 3: S.H colour feature -> Sigma filter -> seeds along
 /// the field-of-view border -> region growing -> two-class boundary split -> LMedS line pair ->
-/// sub-pixel lines on the full-resolution image. Stateful only through the cached field of
-/// view; not thread-safe (one instance per stream).
+/// sub-pixel lines on the full-resolution image. In a video, the shafts found are followed by
+/// contour tracking between detection frames (every tracking.detect_every frames, or at once when
+/// one is lost); each seed's growth level is remembered. Not thread-safe (one instance per
+/// stream); call reset() between unrelated images.
 class InstrumentSegmenter {
  public:
   explicit InstrumentSegmenter(SegmentationParams const& params = {});
@@ -56,6 +63,8 @@ class InstrumentSegmenter {
   /// in full-resolution pixels ([Doignon07] Sec. 4), focusing the seed search; may be empty.
   SegmentationResult process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocar_images = {});
   void setParams(SegmentationParams const& p);
+  /// Forgets the previous frames (tracked shafts, seed memory, field of view).
+  void reset();
   SegmentationParams const& params() const { return params_; }
   FieldOfView const& fieldOfView() const { return fov_; }
   /// Intermediate images of the last frame (processing scale), for debugging and overlays.
@@ -83,9 +92,15 @@ class InstrumentSegmenter {
     bool grown = true;      // a region was kept (false: every level leaked)
   };
   Memory const* remembered(Seed const& seed) const;
-  bool stripSearchDue(Memory const* m, Seed const& seed) const;
+  bool stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const;
+  std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
   RegionGrower grower_;
   std::vector<Memory> memory_;
+  std::vector<TrackedShaft> tracked_;  // the shafts of the last frame, to follow
+  std::vector<std::size_t> tracked_memory_;  // per tracked shaft: its seed's entry in memory_
+  cv::Size tracked_size_;
+  int scale_ = 1;
+  int since_detection_ = 0;  // tracking frames since the last detection frame
   cv::Mat small_, raw_, filtered_, labels_, gx_, gy_;
 };
 

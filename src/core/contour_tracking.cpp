@@ -1,0 +1,156 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/contour_tracking.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace endo_guidance::core {
+
+namespace {
+
+Eigen::Vector2d axisDirection(ApparentContour const& c) {
+  Eigen::Vector2d const d = c.tip_px - c.entry_px;
+  return d.norm() > 1e-9 ? Eigen::Vector2d(d.normalized()) : Eigen::Vector2d(c.lines[0].y(), -c.lines[0].x());
+}
+
+double widthAt(ApparentContour const& c, Eigen::Vector2d const& q) {
+  Eigen::Vector3d const x(q.x(), q.y(), 1.0);
+  return c.lines[0].dot(x) + c.lines[1].dot(x);  // both positive inside
+}
+
+// The end of the straight edges: walking from the entry along the axis over the edge points of
+// both sides, the last one before a gap longer than max_gap (jaws, tip, or tissue beyond);
+// `start`: the first one.
+double edgeEnd(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen::Vector2d const& entry,
+               Eigen::Vector2d const& dir, double max_gap, double* start = nullptr) {
+  std::vector<double> t;
+  for (auto const& side : edges)
+    for (auto const& q : side) t.push_back(dir.dot(q - entry));
+  if (t.empty()) return 0.0;
+  std::sort(t.begin(), t.end());
+  if (start) *start = t.front();
+  double end = t.front();
+  for (double v : t) {
+    if (v - end > max_gap) break;
+    end = v;
+  }
+  return end;
+}
+
+// Where the image axis leaves the field of view near q (full-res), walking along it in processing
+// pixels: the last point inside. nullopt when the walk finds no exit within max_steps.
+std::optional<Eigen::Vector2d> axisExit(FieldOfView const& fov, int scale, Eigen::Vector2d const& q, Eigen::Vector2d const& dir,
+                                        int max_steps) {
+  double const off = 0.5 * (scale - 1);
+  auto inside = [&](Eigen::Vector2d const& x) {
+    int const u = static_cast<int>(std::lround(x.x())), v = static_cast<int>(std::lround(x.y()));
+    return u >= 0 && v >= 0 && u < fov.mask.cols && v < fov.mask.rows && fov.mask.at<std::uint8_t>(v, u) != 0;
+  };
+  Eigen::Vector2d p = (q - Eigen::Vector2d(off, off)) / scale;
+  int k = 0;
+  if (inside(p)) {
+    for (; k < max_steps && inside(p - dir); ++k) p -= dir;  // out to the border
+    if (k == max_steps) return std::nullopt;
+  } else {
+    for (; k < max_steps && !inside(p); ++k) p += dir;  // into the view
+    if (!inside(p)) return std::nullopt;
+  }
+  return Eigen::Vector2d(p * scale + Eigen::Vector2d(off, off));
+}
+
+}  // namespace
+
+TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                        double max_gap_px) {
+  TrackedShaft s;
+  s.contour = contour;
+  s.edges = edges;
+  Eigen::Vector2d const dir = axisDirection(contour);
+  double const tip = dir.dot(contour.tip_px - contour.entry_px);
+  s.edge_end = std::min(edgeEnd(edges, contour.entry_px, dir, max_gap_px, &s.edge_start), tip);
+  s.edge_start = std::max(0.0, std::min(s.edge_start, s.edge_end));
+  s.tip_beyond = std::max(0.0, tip - s.edge_end);
+  return s;
+}
+
+TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, ContourLinesParams const& p,
+                            ContourTrackingParams const& tp, FieldOfView const* fov, int scale) {
+  TrackingResult out;
+  auto reject = [&](ContourRejection r) {
+    out.rejection = r;
+    return out;
+  };
+  ApparentContour const& pc = prev.contour;
+  Eigen::Vector2d const dir0 = axisDirection(pc);
+  // The two passes of refineContour(): wide about last frame's line (the shaft moved by up to
+  // coarse_halfwidth_px), then narrow about the line found.
+  ContourLinesParams wide = p;
+  wide.refine_halfwidth_px = p.coarse_halfwidth_px;
+  wide.profile_step_px = 2.0 * p.profile_step_px;
+  wide.refine_step_px = tp.coarse_step_px;  // the narrow pass uses every profile
+  wide.min_edge_points = std::max(3, static_cast<int>(p.min_edge_points * p.refine_step_px / tp.coarse_step_px));
+  RefinedLine ref[2];
+  for (int s = 0; s < 2; ++s) {
+    ImageLine const& l = pc.lines[s];
+    Eigen::Vector2d const d(-l.y(), l.x());
+    double t0 = d.dot(footOnLine(l, pc.entry_px + prev.edge_start * dir0));
+    double t1 = d.dot(footOnLine(l, pc.entry_px + prev.edge_end * dir0));
+    if (t0 > t1) std::swap(t0, t1);
+    auto const r0 = refineLineSubpixel(bgr, l, t0, t1, wide);
+    if (!r0) return reject(ContourRejection::kWeakEdges);
+    auto const r = refineLineSubpixel(bgr, r0->line, t0, t1, p);
+    if (!r) return reject(ContourRejection::kWeakEdges);
+    if (r->residual_px > p.max_residual_px) return reject(ContourRejection::kResidual);
+    ref[s] = *r;
+  }
+  double const cosang = std::abs(ref[0].line.head<2>().dot(ref[1].line.head<2>()));
+  if (cosang < std::cos(p.max_angle_deg * M_PI / 180.0)) return reject(ContourRejection::kNotParallel);
+  TrackedShaft now;
+  ApparentContour& c = now.contour;
+  c = pc;  // ids carried over
+  c.lines = {ref[0].line, ref[1].line};
+  c.line_covariances = {ref[0].covariance, ref[1].covariance};
+  c.line_residual_px = {ref[0].residual_px, ref[1].residual_px};
+  c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
+  now.edges = {ref[0].inliers, ref[1].inliers};
+  // The new axis, oriented as before. The entry: where it leaves the field of view (a shaft
+  // pivoting about its trocar slides along the border), else last frame's moved onto it.
+  ImageLine const ax = imageAxis(c);
+  Eigen::Vector2d dir(-ax.y(), ax.x());
+  if (dir.dot(dir0) < 0.0) dir = -dir;
+  Eigen::Vector2d const e0 = footOnLine(ax, pc.entry_px);
+  Eigen::Vector2d entry = e0;
+  if (fov && !fov->mask.empty())
+    if (auto e = axisExit(*fov, std::max(1, scale), e0, dir, static_cast<int>(std::ceil(tp.extend_px))))
+      entry = footOnLine(ax, *e);
+  // Pushed in: edge points on the new lines beyond last frame's end (not fitted: the jaws and
+  // whatever lies beyond the tip would pull the lines) move the end of the edges.
+  std::array<std::vector<Eigen::Vector2d>, 2> reach = now.edges;
+  for (int s = 0; s < 2; ++s) {
+    ImageLine const& l = c.lines[s];
+    Eigen::Vector2d const d(-l.y(), l.x());
+    double t0 = d.dot(footOnLine(l, e0 + prev.edge_end * dir));  // (last frame's end, measured from its entry)
+    double t1 = d.dot(footOnLine(l, e0 + (prev.edge_end + tp.extend_px) * dir));
+    if (t0 > t1) std::swap(t0, t1);
+    double const tol = std::max(1.0, 2.5 * c.line_residual_px[static_cast<std::size_t>(s)]);
+    for (Eigen::Vector2d const& q : subpixelEdgePoints(bgr, l, t0, t1, p))
+      if (std::abs(l.dot(Eigen::Vector3d(q.x(), q.y(), 1.0))) <= tol) reach[static_cast<std::size_t>(s)].push_back(q);
+  }
+  now.edge_end = edgeEnd(reach, entry, dir, tp.max_gap_px);
+  now.tip_beyond = prev.tip_beyond;
+  now.edge_start = prev.edge_start;
+  c.entry_px = entry;
+  c.tip_px = entry + (now.edge_end + now.tip_beyond) * dir;
+  double const len = (c.tip_px - c.entry_px).norm();
+  if (len < p.min_length_px) return reject(ContourRejection::kTooShort);
+  double const we = widthAt(c, c.entry_px), wt = widthAt(c, c.tip_px);
+  // Positive widths at both ends: the lines do not cross between them.
+  if (we < p.min_width_px || wt < p.min_width_px) return reject(ContourRejection::kTooThin);
+  double const we0 = widthAt(pc, pc.entry_px);
+  if (std::abs(we - we0) > tp.max_width_change * we0 + 2.0) return reject(ContourRejection::kWidthJump);
+  if (len < p.min_elongation * 0.5 * (we + wt)) return reject(ContourRejection::kNotElongated);
+  out.shaft = std::move(now);
+  return out;
+}
+
+}  // namespace endo_guidance::core
