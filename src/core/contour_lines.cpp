@@ -216,6 +216,10 @@ std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, 
   return out;
 }
 
+namespace {
+
+// The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
+// min_edge_contrast.
 std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                                ContourLinesParams const& p) {
   Eigen::Vector2d const n = line.head<2>();   // toward the shaft
@@ -254,6 +258,8 @@ std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine co
   }
   return pts;
 }
+
+}  // namespace
 
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& p) {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace endo_guidance::core {
 
@@ -18,23 +19,18 @@ double widthAt(ApparentContour const& c, Eigen::Vector2d const& q) {
   return c.lines[0].dot(x) + c.lines[1].dot(x);  // both positive inside
 }
 
-// The end of the straight edges: walking from the entry along the axis over the edge points of
-// both sides, the last one before a gap longer than max_gap (jaws, tip, or tissue beyond);
-// `start`: the first one.
-double edgeEnd(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen::Vector2d const& entry,
-               Eigen::Vector2d const& dir, double max_gap, double* start = nullptr) {
-  std::vector<double> t;
+// The extent of the edge points along the axis from `entry`.
+void edgeExtent(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen::Vector2d const& entry, Eigen::Vector2d const& dir,
+                double* start, double* end) {
+  *start = std::numeric_limits<double>::infinity();
+  *end = -*start;
   for (auto const& side : edges)
-    for (auto const& q : side) t.push_back(dir.dot(q - entry));
-  if (t.empty()) return 0.0;
-  std::sort(t.begin(), t.end());
-  if (start) *start = t.front();
-  double end = t.front();
-  for (double v : t) {
-    if (v - end > max_gap) break;
-    end = v;
-  }
-  return end;
+    for (auto const& q : side) {
+      double const t = dir.dot(q - entry);
+      *start = std::min(*start, t);
+      *end = std::max(*end, t);
+    }
+  if (*start > *end) *start = *end = 0.0;
 }
 
 // Where the image axis leaves the field of view near q (full-res), walking along it in processing
@@ -60,16 +56,13 @@ std::optional<Eigen::Vector2d> axisExit(FieldOfView const& fov, int scale, Eigen
 
 }  // namespace
 
-TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
-                        double max_gap_px) {
+TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges) {
   TrackedShaft s;
   s.contour = contour;
   s.edges = edges;
   Eigen::Vector2d const dir = axisDirection(contour);
-  double const tip = dir.dot(contour.tip_px - contour.entry_px);
-  s.edge_end = std::min(edgeEnd(edges, contour.entry_px, dir, max_gap_px, &s.edge_start), tip);
-  s.edge_start = std::max(0.0, std::min(s.edge_start, s.edge_end));
-  s.tip_beyond = std::max(0.0, tip - s.edge_end);
+  edgeExtent(edges, contour.entry_px, dir, &s.edge_start, &s.edge_end);
+  s.tip_distance = std::max(0.0, dir.dot(contour.tip_px - contour.entry_px));
   return s;
 }
 
@@ -121,26 +114,16 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   Eigen::Vector2d const e0 = footOnLine(ax, pc.entry_px);
   Eigen::Vector2d entry = e0;
   if (fov && !fov->mask.empty())
-    if (auto e = axisExit(*fov, std::max(1, scale), e0, dir, static_cast<int>(std::ceil(tp.extend_px))))
+    if (auto e = axisExit(*fov, std::max(1, scale), e0, dir, 16))  // (processing px)
       entry = footOnLine(ax, *e);
-  // Pushed in: edge points on the new lines beyond last frame's end (not fitted: the jaws and
-  // whatever lies beyond the tip would pull the lines) move the end of the edges.
-  std::array<std::vector<Eigen::Vector2d>, 2> reach = now.edges;
-  for (int s = 0; s < 2; ++s) {
-    ImageLine const& l = c.lines[s];
-    Eigen::Vector2d const d(-l.y(), l.x());
-    double t0 = d.dot(footOnLine(l, e0 + prev.edge_end * dir));  // (last frame's end, measured from its entry)
-    double t1 = d.dot(footOnLine(l, e0 + (prev.edge_end + tp.extend_px) * dir));
-    if (t0 > t1) std::swap(t0, t1);
-    double const tol = std::max(1.0, 2.5 * c.line_residual_px[static_cast<std::size_t>(s)]);
-    for (Eigen::Vector2d const& q : subpixelEdgePoints(bgr, l, t0, t1, p))
-      if (std::abs(l.dot(Eigen::Vector3d(q.x(), q.y(), 1.0))) <= tol) reach[static_cast<std::size_t>(s)].push_back(q);
-  }
-  now.edge_end = edgeEnd(reach, entry, dir, tp.max_gap_px);
-  now.tip_beyond = prev.tip_beyond;
+  // The fitted extent and the tip keep their distances from the entry: insertion and
+  // withdrawal are measured by the next detection frame (an edge-based tip jumped by up to 200
+  // px on the robotic sequences, where highlights break the edges and the wrist continues them).
   now.edge_start = prev.edge_start;
+  now.edge_end = prev.edge_end;
+  now.tip_distance = prev.tip_distance;
   c.entry_px = entry;
-  c.tip_px = entry + (now.edge_end + now.tip_beyond) * dir;
+  c.tip_px = entry + now.tip_distance * dir;
   double const len = (c.tip_px - c.entry_px).norm();
   if (len < p.min_length_px) return reject(ContourRejection::kTooShort);
   double const we = widthAt(c, c.entry_px), wt = widthAt(c, c.tip_px);

@@ -2,6 +2,7 @@
 #include "endo_guidance/core/segmentation.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
@@ -67,6 +68,16 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
     if (!r.shaft || !stripContrastFullRes(bgr, r.shaft->contour, params_.strip)) return std::nullopt;
     now.push_back(std::move(*r.shaft));
   }
+  // Two tracks that converged on one shaft (its double detection: shaft and shadow, or two
+  // seeds on its border run) -- a frame that needs the detection.
+  for (std::size_t i = 0; i < now.size(); ++i)
+    for (std::size_t j = i + 1; j < now.size(); ++j) {
+      ImageLine const ai = imageAxis(now[i].contour);
+      ApparentContour const& cj = now[j].contour;
+      if (std::abs(ai.head<2>().dot(imageAxis(cj).head<2>())) > std::cos(2.0 * M_PI / 180.0) &&
+          std::abs(ai.dot(cj.entry_px.homogeneous())) < 3.0 && std::abs(ai.dot(cj.tip_px.homogeneous())) < 3.0)
+        return std::nullopt;
+    }
   // The seeds' memory follows the shafts, so that the next detection frame finds each shaft's
   // seed where its memory is (and tries its growth level first).
   for (std::size_t i = 0; i < now.size(); ++i) {
@@ -303,7 +314,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   tracked_memory_.clear();
   if (params_.tracking.detect_every > 1)
     for (std::size_t i = 0; i < res.contours.size(); ++i) {
-      tracked_.push_back(startTrack(res.contours[i], res.edges[i], params_.tracking.max_gap_px));
+      tracked_.push_back(startTrack(res.contours[i], res.edges[i]));
       tracked_memory_.push_back(contour_memory[i]);
     }
   tracked_size_ = bgr.size();

@@ -96,6 +96,7 @@ void SegmentationNodelet::onInit() {
   c.strip_search = S.strip.enabled;
   c.strip_max_inside_outside_ratio = S.strip.max_inside_outside_ratio;
   c.max_regions = S.regions.max_regions;
+  c.detect_every = S.tracking.detect_every;
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](SegmentationConfig& cfg, uint32_t level) { configCb(cfg, level); });
 
@@ -148,6 +149,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.strip.enabled = c.strip_search;
   S.strip.max_inside_outside_ratio = c.strip_max_inside_outside_ratio;
   S.regions.max_regions = c.max_regions;
+  S.tracking.detect_every = c.detect_every;
   segmenter_.setParams(S);
 }
 

@@ -75,10 +75,6 @@ struct RefinedLine {
 };
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& params);
-/// The sub-pixel edge points of refineLineSubpixel() alone (no line fit): one per profile that
-/// has an edge steeper than min_edge_contrast.
-std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
-                                               ContourLinesParams const& params);
 
 /// [Doignon07] Sec. 3: the ordered region boundary is split in two classes at the boundary point
 /// farthest from the seed (points on the FOV border excluded), a line is fitted to each class

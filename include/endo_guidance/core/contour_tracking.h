@@ -18,33 +18,31 @@ struct ContourTrackingParams {
   /// between, each shaft found is refined directly from its lines of the frame before. A shaft
   /// that cannot be followed makes that frame a detection frame at once. 1: detect every frame.
   int detect_every = 4;
-  double extend_px = 24.0;         ///< full-res: edge points are looked for this far beyond last frame's end of the edges (insertion)
   double max_width_change = 0.25;  ///< the shaft's width at the entry may change this much (relative, plus 2 px) per frame
-  double max_gap_px = 16.0;        ///< full-res: the straight edges end at the first gap this long between edge points
   double coarse_step_px = 6.0;     ///< full-res: profile spacing of the wide pass (the narrow one uses refine_step_px)
 };
 
-/// A shaft followed from frame to frame: its contour, the sub-pixel edge points behind each line,
-/// and where along the axis the straight edges end (the tip lies beyond them by the jaws' length).
+/// A shaft followed from frame to frame: its contour, the sub-pixel edge points behind each
+/// line, and the extent of the edges fitted and the tip along the axis, from the entry.
 struct TrackedShaft {
   ApparentContour contour;
   std::array<std::vector<Eigen::Vector2d>, 2> edges;
-  double edge_start = 0.0; ///< full-res px from the entry along the axis: where the edges fitted begin (kept from the detection)
-  double edge_end = 0.0;   ///< ... and where the straight edges end
-  double tip_beyond = 0.0; ///< full-res px: the tip's distance beyond edge_end (>= 0)
+  double edge_start = 0.0;    ///< full-res px from the entry along the axis: where the fitted edges begin
+  double edge_end = 0.0;      ///< ... and end (both kept from the detection frame)
+  double tip_distance = 0.0;  ///< ... the tip's distance (kept from the detection frame)
 };
 
 /// The tracked state of a shaft found by the detection (its contour and edge points).
-TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
-                        double max_gap_px);
+TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges);
 
 /// Contour tracking: the shaft of the previous frame found again in `bgr` (full resolution)
 /// without segmenting it. Each contour line is refined as in refineContour() -- a wide sub-pixel
-/// pass about last frame's line, then a narrow one about its result -- over last frame's straight
-/// part of the shaft; edge points on the new lines up to extend_px beyond it (the shaft may have
-/// been pushed in) move the end of the edges, and the tip with it. Refused (nullopt, with the reason) when a side has too few edge points or too
-/// large a residual, the lines cross or diverge, the width jumps, or the shaft became too short:
-/// the caller then runs the full detection.
+/// pass about last frame's line, then a narrow one about its result -- over the extent of the
+/// edges fitted at the detection. The entry moves to where the new axis leaves the field of
+/// view; the tip keeps its distance from the entry along the axis (insertion is measured at the
+/// next detection frame). Refused (nullopt, with the reason) when a side has too few edge points
+/// or too large a residual, the lines diverge or cross, or the width jumps: the caller then runs
+/// the full detection.
 struct TrackingResult {
   std::optional<TrackedShaft> shaft;
   ContourRejection rejection = ContourRejection::kNone;
