@@ -80,9 +80,9 @@ void BM_Pipeline(benchmark::State& st) {
 // timed apart, so that both see the same phase of a noisy machine; `ratio` is the sum of the
 // pipeline times over the sum of the HSV times (the figure the README quotes). The ratios of
 // separate benchmarks (above) moved by up to 40 % between runs here, the paired one by a few %.
-void BM_PipelinePairedWithHSV(benchmark::State& st) {
+void pairedWithHSV(benchmark::State& st, PipelineParams const& params) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
-  Pipeline p(f.K, f.images[0].size());
+  Pipeline p(f.K, f.images[0].size(), params);
   for (auto const& im : f.images) p.process(im);  // warm: insertion points, levels
   cv::Mat hsv;
   double t_hsv = 0.0, t_pipe = 0.0;
@@ -112,6 +112,16 @@ void BM_PipelinePairedWithHSV(benchmark::State& st) {
   st.counters["hsv_us"] = t_hsv / n;
   st.counters["pipeline_us"] = t_pipe / n;
   st.counters["ratio"] = t_hsv > 0.0 ? t_pipe / t_hsv : 0.0;
+}
+
+void BM_PipelinePairedWithHSV(benchmark::State& st) { pairedWithHSV(st, PipelineParams{}); }
+
+// The same with contour tracking between detection frames (detect_every 4: a speed mode, not the
+// default; see contour_tracking.h).
+void BM_PipelineTrackingPairedWithHSV(benchmark::State& st) {
+  PipelineParams p;
+  p.segmentation.tracking.detect_every = 4;
+  pairedWithHSV(st, p);
 }
 
 void BM_Stage_Resize(benchmark::State& st) {
@@ -184,6 +194,7 @@ void sizes(benchmark::internal::Benchmark* b) {
 BENCHMARK(BM_HSV)->Apply(sizes);
 BENCHMARK(BM_Pipeline)->Apply(sizes);
 BENCHMARK(BM_PipelinePairedWithHSV)->Apply(sizes);
+BENCHMARK(BM_PipelineTrackingPairedWithHSV)->Apply(sizes);
 BENCHMARK(BM_Stage_Resize)->Apply(sizes);
 BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
 BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);

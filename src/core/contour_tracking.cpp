@@ -54,6 +54,73 @@ std::optional<Eigen::Vector2d> axisExit(FieldOfView const& fov, int scale, Eigen
   return Eigen::Vector2d(p * scale + Eigen::Vector2d(off, off));
 }
 
+double chromaNearest(cv::Mat const& bgr, Eigen::Vector2d const& q, bool* ok) {
+  int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+  *ok = x >= 0 && y >= 0 && x < bgr.cols && y < bgr.rows;
+  if (!*ok) return 0.0;
+  cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
+  return std::max({px[0], px[1], px[2]}) - std::min({px[0], px[1], px[2]});
+}
+
+double median(std::vector<double>& v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// The tip along the axis (distance from `entry`), measured as the region's end is in the
+// detection: where the low chroma between the lines (shaft, jaws, and their highlights) gives way
+// to tissue for `run` px. The threshold is halfway between the chroma inside the fitted part and
+// beside it; the search covers t_pred +- reach. nullopt without contrast or samples.
+std::optional<double> tipAlongAxis(cv::Mat const& bgr, ApparentContour const& c, Eigen::Vector2d const& entry,
+                                   Eigen::Vector2d const& dir, double edge_start, double edge_end, double t_pred, double reach) {
+  Eigen::Vector2d const nrm(-dir.y(), dir.x());
+  auto widthAtT = [&](double t) { return widthAt(c, entry + t * dir); };
+  // Across the axis at t: the lowest of the middle and +-1/4 width (the jaws, narrower than the
+  // shaft, need not cover all three).
+  auto inside = [&](double t, bool* ok) {
+    double const w = widthAtT(t), q = 0.25 * std::max(w, 0.0);
+    Eigen::Vector2d const m = entry + t * dir;
+    double lo = std::numeric_limits<double>::infinity();
+    for (double o : {-q, 0.0, q}) {
+      bool in = false;
+      double const v = chromaNearest(bgr, m + o * nrm, &in);
+      if (in) lo = std::min(lo, v);
+    }
+    *ok = std::isfinite(lo);
+    return *ok ? lo : 0.0;
+  };
+  std::vector<double> vin, vout;
+  for (double t = edge_start; t <= edge_end; t += 4.0) {
+    bool ok = false;
+    double const v = inside(t, &ok);
+    if (ok) vin.push_back(v);
+    double const w = std::max(widthAtT(t), 0.0);
+    Eigen::Vector2d const m = entry + t * dir;
+    for (double side : {-1.0, 1.0}) {
+      double const o = side * (0.5 * w + 4.0 + 0.5 * w);
+      double const u = chromaNearest(bgr, m + o * nrm, &ok);
+      if (ok) vout.push_back(u);
+    }
+  }
+  if (vin.size() < 5 || vout.size() < 5) return std::nullopt;
+  double const lo = median(vin), hi = median(vout);
+  if (hi - lo < 8.0) return std::nullopt;  // no chroma contrast to measure the end by
+  double const thr = 0.5 * (lo + hi);
+  int const run = 3;
+  int above = 0;
+  double const t0 = std::max(edge_start, t_pred - reach), t1 = t_pred + reach;
+  for (double t = t0; t <= t1; t += 1.0) {
+    bool ok = false;
+    double const v = inside(t, &ok);
+    if (!ok || v > thr) {
+      if (++above >= run) return std::max(t0, t - run);  // the last shaft-like sample
+    } else {
+      above = 0;
+    }
+  }
+  return t1;  // pushed in beyond the search: the rest next frame
+}
+
 }  // namespace
 
 TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges) {
@@ -116,12 +183,16 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   if (fov && !fov->mask.empty())
     if (auto e = axisExit(*fov, std::max(1, scale), e0, dir, 16))  // (processing px)
       entry = footOnLine(ax, *e);
-  // The fitted extent and the tip keep their distances from the entry: insertion and
-  // withdrawal are measured by the next detection frame (an edge-based tip jumped by up to 200
-  // px on the robotic sequences, where highlights break the edges and the wrist continues them).
+  // The tip: where the shaft-like interior ends along the axis, as the region's end in the
+  // detection (the end of the edges jumped by up to 200 px on the robotic sequences, where
+  // highlights break the edges and the wrist continues them); without contrast, it keeps its
+  // distance from the entry. The fitted extent moves with it (insertion, withdrawal).
+  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + prev.tip_distance * dir));
+  auto const tip = tipAlongAxis(bgr, c, entry, dir, prev.edge_start, prev.edge_end, prev.tip_distance, reach);
+  now.tip_distance = tip ? *tip : prev.tip_distance;
   now.edge_start = prev.edge_start;
-  now.edge_end = prev.edge_end;
-  now.tip_distance = prev.tip_distance;
+  now.edge_end = std::max(prev.edge_start + 0.5 * (prev.edge_end - prev.edge_start),
+                          std::min(now.tip_distance, prev.edge_end + (now.tip_distance - prev.tip_distance)));
   c.entry_px = entry;
   c.tip_px = entry + now.tip_distance * dir;
   double const len = (c.tip_px - c.entry_px).norm();

@@ -109,6 +109,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/detect_every", i(S.tracking.detect_every)},
       {"segmentation/track_max_width_change", d(S.tracking.max_width_change)},
       {"segmentation/track_coarse_step_px", d(S.tracking.coarse_step_px)},
+      {"segmentation/track_tip_reach_px", d(S.tracking.tip_reach_px)},
       {"segmentation/strip_search", b(S.strip.enabled)},
       {"segmentation/strip_max_angle_deg", d(S.strip.max_angle_deg)},
       {"segmentation/strip_min_response", d(S.strip.min_response)},

@@ -66,6 +66,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.tracking.detect_every, defaults.segmentation.tracking.detect_every);
   EXPECT_EQ(shipped.segmentation.tracking.max_width_change, defaults.segmentation.tracking.max_width_change);
   EXPECT_EQ(shipped.segmentation.tracking.coarse_step_px, defaults.segmentation.tracking.coarse_step_px);
+  EXPECT_EQ(shipped.segmentation.tracking.tip_reach_px, defaults.segmentation.tracking.tip_reach_px);
   using SP = StripSearchParams;
   for (double SP::*m : {&SP::max_angle_deg, &SP::min_response, &SP::min_inside_low, &SP::max_inside_outside_ratio,
                         &SP::min_length_ratio, &SP::max_full_res_ratio, &SP::max_full_res_ratio_matte,
