@@ -52,9 +52,9 @@ struct SegmentationResult {
 
 /// Instrument segmentation, [Doignon07] Sec. 3: S.H colour feature -> Sigma filter -> seeds along
 /// the field-of-view border -> region growing -> two-class boundary split -> LMedS line pair ->
-/// sub-pixel lines on the full-resolution image. In a video, the shafts found are followed by
-/// contour tracking between detection frames (every tracking.detect_every frames, or at once when
-/// one is lost); each seed's growth level is remembered. Not thread-safe (one instance per
+/// sub-pixel lines on the full-resolution image. In a video, each seed's growth level is
+/// remembered; with tracking.detect_every > 1 (opt-in), the shafts found are followed by contour
+/// tracking between detection frames (a lost one makes the frame a detection frame). Not thread-safe (one instance per
 /// stream); call reset() between unrelated images.
 class InstrumentSegmenter {
  public:
