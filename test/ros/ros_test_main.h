@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <string>
 
 #include "endo_guidance/InsertionPointArray.h"
 
@@ -16,6 +17,19 @@ inline int runRosTests(int argc, char** argv, char const* node_name, int threads
   int const r = RUN_ALL_TESTS();
   spinner.stop();
   return r;
+}
+
+/// A service call that survives a transport failure on a loaded machine (seen once: the server
+/// handled the request, the client got false): waits for the service, then tries up to three
+/// times -- only for idempotent calls. The server's answer is checked by the caller.
+template <class S>
+bool callService(std::string const& name, S& srv) {
+  if (!ros::service::waitForService(name, 5000)) return false;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    if (ros::service::call(name, srv)) return true;
+    ros::Duration(0.2).sleep();
+  }
+  return false;
 }
 
 /// Waits (up to timeout_s of wall time) until the pipeline reports `count` well-conditioned

@@ -50,18 +50,7 @@ struct Latest {
   }
 };
 
-/// A service call that survives a transport failure on a loaded machine (seen once: the server
-/// handled the request, the client got false): waits for the service, then tries up to three
-/// times -- the calls here are idempotent. The server's answer is checked by the caller.
-template <class S>
-bool callService(std::string const& name, S& srv) {
-  if (!ros::service::waitForService(name, 5000)) return false;
-  for (int attempt = 0; attempt < 3; ++attempt) {
-    if (ros::service::call(name, srv)) return true;
-    ros::Duration(0.2).sleep();
-  }
-  return false;
-}
+using endo_guidance::test::callService;
 
 bool finite(std::initializer_list<double> v) {
   for (double x : v)

@@ -219,7 +219,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   EXPECT_GT(last_nonzero_rate, 0.0) << "the servo was not moving before the loss";
   std_srvs::SetBool occ;
   occ.request.data = true;
-  ASSERT_TRUE(ros::service::call("endoscope_simulator/occlude", occ));
+  ASSERT_TRUE(test::callService("endoscope_simulator/occlude", occ));  // (idempotent)
   hidden_from = ros::Time::now().toSec();
   hidden = true;
   ros::WallDuration(1.0).sleep();
@@ -231,7 +231,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   EXPECT_LT(delay, 0.04);
   EXPECT_EQ(nonzero_after.load(), 0);
   occ.request.data = false;
-  ros::service::call("endoscope_simulator/occlude", occ);
+  test::callService("endoscope_simulator/occlude", occ);
 }
 }  // namespace
 
