@@ -261,6 +261,13 @@ std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine co
 
 }  // namespace
 
+ContourLinesParams widePass(ContourLinesParams const& p) {
+  ContourLinesParams wide = p;
+  wide.refine_halfwidth_px = p.coarse_halfwidth_px;
+  wide.profile_step_px = 2.0 * p.profile_step_px;
+  return wide;
+}
+
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& p) {
   std::vector<Eigen::Vector2d> const pts = subpixelEdgePoints(bgr, line, t0, t1, p);
@@ -450,9 +457,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     }
     // Two passes: a wide search (the region boundary can sit several px inside the shaft's
     // shaded rim), then a narrow one around the refitted line.
-    ContourLinesParams wide = p;
-    wide.refine_halfwidth_px = p.coarse_halfwidth_px;
-    wide.profile_step_px = 2.0 * p.profile_step_px;
+    ContourLinesParams wide = widePass(p);
     // (every profile: sparser recentring cost 5 points of in-vivo recall)
     wide.max_residual_px = 1e9;
     auto const r0 = refineLineSubpixel(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide);
@@ -584,9 +589,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
 
 double scoreSides(SideFit const& sides, cv::Mat const& bgr, ContourLinesParams const& p) {
   if (sides.rejection != ContourRejection::kNone) return -1.0;
-  ContourLinesParams wide = p;
-  wide.refine_halfwidth_px = p.coarse_halfwidth_px;
-  wide.profile_step_px = 2.0 * p.profile_step_px;
+  ContourLinesParams wide = widePass(p);
   wide.refine_step_px = p.score_step_px;
   wide.min_edge_points = std::max(3, p.min_edge_points / 3);
   double score = 0.0;

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include "endo_guidance/core/colour_feature.h"
+
 namespace endo_guidance::core {
 
 namespace {
@@ -59,7 +61,7 @@ double chromaNearest(cv::Mat const& bgr, Eigen::Vector2d const& q, bool* ok) {
   *ok = x >= 0 && y >= 0 && x < bgr.cols && y < bgr.rows;
   if (!*ok) return 0.0;
   cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
-  return std::max({px[0], px[1], px[2]}) - std::min({px[0], px[1], px[2]});
+  return ColourFeature::chroma(px[0], px[1], px[2]);
 }
 
 double median(std::vector<double>& v) {
@@ -97,7 +99,7 @@ std::optional<double> tipAlongAxis(cv::Mat const& bgr, ApparentContour const& c,
     double const w = std::max(widthAtT(t), 0.0);
     Eigen::Vector2d const m = entry + t * dir;
     for (double side : {-1.0, 1.0}) {
-      double const o = side * (0.5 * w + 4.0 + 0.5 * w);
+      double const o = side * (w + 4.0);  // half a width and 4 px beyond each line
       double const u = chromaNearest(bgr, m + o * nrm, &ok);
       if (ok) vout.push_back(u);
     }
@@ -144,9 +146,7 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   Eigen::Vector2d const dir0 = axisDirection(pc);
   // The two passes of refineContour(): wide about last frame's line (the shaft moved by up to
   // coarse_halfwidth_px), then narrow about the line found.
-  ContourLinesParams wide = p;
-  wide.refine_halfwidth_px = p.coarse_halfwidth_px;
-  wide.profile_step_px = 2.0 * p.profile_step_px;
+  ContourLinesParams wide = widePass(p);
   wide.refine_step_px = tp.coarse_step_px;  // the narrow pass uses every profile
   wide.min_edge_points = std::max(3, static_cast<int>(p.min_edge_points * p.refine_step_px / tp.coarse_step_px));
   RefinedLine ref[2];

@@ -75,6 +75,9 @@ struct RefinedLine {
 };
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                               ContourLinesParams const& params);
+/// The parameters of the first, wide sub-pixel pass (coarse_halfwidth_px, profiles sampled at
+/// twice profile_step_px), which recentres a line before the narrow pass.
+ContourLinesParams widePass(ContourLinesParams const& params);
 
 /// [Doignon07] Sec. 3: the ordered region boundary is split in two classes at the boundary point
 /// farthest from the seed (points on the FOV border excluded), a line is fitted to each class
