@@ -190,6 +190,14 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + prev.tip_distance * dir));
   auto const tip = tipAlongAxis(bgr, c, entry, dir, prev.edge_start, prev.edge_end, prev.tip_distance, reach);
   now.tip_distance = tip ? *tip : prev.tip_distance;
+  // As in the detection (refineContour), beyond the end of the straight sides only the jaws may
+  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal.
+  {
+    double t_start = 0.0, t_sides = 0.0;
+    edgeExtent(now.edges, entry, dir, &t_start, &t_sides);
+    double const end_width = std::max(widthAt(c, entry + t_sides * dir), 2.0 * std::max(1, scale));
+    now.tip_distance = std::min(now.tip_distance, t_sides + 2.5 * end_width);
+  }
   now.edge_start = prev.edge_start;
   now.edge_end = std::max(prev.edge_start + 0.5 * (prev.edge_end - prev.edge_start),
                           std::min(now.tip_distance, prev.edge_end + (now.tip_distance - prev.tip_distance)));

@@ -87,6 +87,26 @@ TEST(ContourTracking, TheTipFollowsInsertionAndWithdrawal) {
   }
 }
 
+// A pale, achromatic band (membrane) continues the shaft beyond its end, narrower than it: its
+// chroma is as low as the metal's, but beyond the straight sides only 2.5 widths may follow (as
+// in the detection), so the tracked tip does not run along it.
+TEST(ContourTracking, TheTipDoesNotRunAlongAPaleMembrane) {
+  SegmentationParams p;
+  p.tracking.detect_every = 20;
+  InstrumentSegmenter seg(p);
+  Eigen::Vector2d const a(320.0, 700.0), b(320.0, 330.0);
+  cv::Mat im = bar(a, b);
+  cv::rectangle(im, cv::Point(312, 60), cv::Point(328, 330), cv::Scalar(205, 205, 205), cv::FILLED);
+  double const limit = (a.y() - b.y()) + 2.5 * 32.0 + 6.0;  // from the entry, px (the entry is ~ the bottom row)
+  for (int k = 0; k < 8; ++k) {
+    auto const res = seg.process(im);
+    ASSERT_EQ(res.contours.size(), 1u) << k;
+    EXPECT_EQ(res.tracked, k > 0) << k;
+    double const reach_up = 479.0 - res.contours[0].tip_px.y();  // how far above the bottom row
+    EXPECT_LT(reach_up, limit - (700.0 - 479.0)) << k << ": tip " << res.contours[0].tip_px.transpose();
+  }
+}
+
 TEST(ContourTracking, ALostShaftMakesADetectionFrame) {
   SegmentationParams p;
   p.tracking.detect_every = 10;

@@ -17,9 +17,9 @@ struct ContourTrackingParams {
   /// Frames: the full detection (seeds, regions, line pairs) runs this often; in the frames
   /// between, each shaft found is refined directly from its lines of the frame before. A shaft
   /// that cannot be followed makes that frame a detection frame at once. 1 (default): detect
-  /// every frame. 4 made the pipeline 1.9x faster on rendered video, but the tracked tips are
-  /// less exact than the detected ones (the servo's 1 mm tip bound fails with it): a speed mode
-  /// for detection-only use, not yet for guidance.
+  /// every frame. 4 made the pipeline 1.9x faster on rendered video (and passes the servo
+  /// rostest), but on robotic Dataset 1 no insertion point was discovered with it and Dataset 2's
+  /// false shafts rose from 0.29 to 0.38 per frame: opt-in until those are understood.
   int detect_every = 1;
   double max_width_change = 0.25;  ///< the shaft's width at the entry may change this much (relative, plus 2 px) per frame
   double coarse_step_px = 6.0;     ///< full-res: profile spacing of the wide pass (the narrow one uses refine_step_px)
@@ -45,7 +45,8 @@ TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<E
 /// edges fitted at the detection (moved with the tip). The entry moves to where the new axis
 /// leaves the field of view; the tip is where the low chroma between the lines ends along the
 /// axis (threshold halfway between the fitted part's chroma and the tissue's beside it), searched
-/// within tip_reach_px of last frame's; without that contrast it keeps its distance. Refused (nullopt, with the reason) when a side has too few edge points
+/// within tip_reach_px of last frame's and at most 2.5 widths beyond the edges found, as in the
+/// detection; without that contrast it keeps its distance. Refused (nullopt, with the reason) when a side has too few edge points
 /// or too large a residual, the lines diverge or cross, or the width jumps: the caller then runs
 /// the full detection.
 struct TrackingResult {
