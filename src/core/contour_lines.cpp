@@ -525,18 +525,9 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     Eigen::Vector3d const em(entry.x(), entry.y(), 1.0);
     double const w_proc = std::max(1.0, (c.lines[0].dot(em) + c.lines[1].dot(em)) / scale);
     auto const ax = footOnLine(imageAxis(c), entry);
-    Eigen::Vector2d q = (ax - Eigen::Vector2d(off, off)) / scale;
-    auto inside = [&](Eigen::Vector2d const& x) {
-      int const u = static_cast<int>(std::lround(x.x())), v = static_cast<int>(std::lround(x.y()));
-      return u >= 0 && v >= 0 && u < fov.mask.cols && v < fov.mask.rows && fov.mask.at<std::uint8_t>(v, u) != 0;
-    };
     int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
-    if (!inside(q)) {
-      for (int k = 0; k < kmax && !inside(q); ++k) q += axis_dir;  // into the view
-    } else {
-      for (int k = 0; k < kmax && inside(q - axis_dir); ++k) q -= axis_dir;  // out to the border
-    }
-    if (!inside(q)) q = (entry - Eigen::Vector2d(off, off)) / scale;  // no exit found: the seed
+    Eigen::Vector2d const q = walkToEdge(fov, (ax - Eigen::Vector2d(off, off)) / scale, axis_dir, kmax)
+                                  .value_or((entry - Eigen::Vector2d(off, off)) / scale);  // no exit found: the seed
     Eigen::Vector2d const g =
         depthGradient(fov, cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))));
     if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);

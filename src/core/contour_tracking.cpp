@@ -35,27 +35,6 @@ void edgeExtent(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen:
   if (*start > *end) *start = *end = 0.0;
 }
 
-// Where the image axis leaves the field of view near q (full-res), walking along it in processing
-// pixels: the last point inside. nullopt when the walk finds no exit within max_steps.
-std::optional<Eigen::Vector2d> axisExit(FieldOfView const& fov, int scale, Eigen::Vector2d const& q, Eigen::Vector2d const& dir,
-                                        int max_steps) {
-  double const off = 0.5 * (scale - 1);
-  auto inside = [&](Eigen::Vector2d const& x) {
-    int const u = static_cast<int>(std::lround(x.x())), v = static_cast<int>(std::lround(x.y()));
-    return u >= 0 && v >= 0 && u < fov.mask.cols && v < fov.mask.rows && fov.mask.at<std::uint8_t>(v, u) != 0;
-  };
-  Eigen::Vector2d p = (q - Eigen::Vector2d(off, off)) / scale;
-  int k = 0;
-  if (inside(p)) {
-    for (; k < max_steps && inside(p - dir); ++k) p -= dir;  // out to the border
-    if (k == max_steps) return std::nullopt;
-  } else {
-    for (; k < max_steps && !inside(p); ++k) p += dir;  // into the view
-    if (!inside(p)) return std::nullopt;
-  }
-  return Eigen::Vector2d(p * scale + Eigen::Vector2d(off, off));
-}
-
 double chromaNearest(cv::Mat const& bgr, Eigen::Vector2d const& q, bool* ok) {
   int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
   *ok = x >= 0 && y >= 0 && x < bgr.cols && y < bgr.rows;
@@ -180,9 +159,12 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   if (dir.dot(dir0) < 0.0) dir = -dir;
   Eigen::Vector2d const e0 = footOnLine(ax, pc.entry_px);
   Eigen::Vector2d entry = e0;
-  if (fov && !fov->mask.empty())
-    if (auto e = axisExit(*fov, std::max(1, scale), e0, dir, 16))  // (processing px)
-      entry = footOnLine(ax, *e);
+  if (fov && !fov->mask.empty()) {  // where the new axis leaves the view, at most 16 processing px away
+    double const sc = std::max(1, scale), off = 0.5 * (sc - 1);
+    bool at_edge = false;
+    auto const e = walkToEdge(*fov, (e0 - Eigen::Vector2d(off, off)) / sc, dir, 16, &at_edge);
+    if (e && at_edge) entry = footOnLine(ax, *e * sc + Eigen::Vector2d(off, off));
+  }
   // The tip: where the shaft-like interior ends along the axis, as the region's end in the
   // detection (the end of the edges jumped by up to 200 px on the robotic sequences, where
   // highlights break the edges and the wrist continues them); without contrast, it keeps its

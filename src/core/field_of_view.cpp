@@ -2,6 +2,7 @@
 #include "endo_guidance/core/field_of_view.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include <opencv2/imgproc.hpp>
 
@@ -69,6 +70,25 @@ Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p) {
   int const x = std::clamp(p.x, 3, fov.depth.cols - 4), y = std::clamp(p.y, 3, fov.depth.rows - 4);
   return {fov.depth.at<float>(y, x + 3) - fov.depth.at<float>(y, x - 3),
           fov.depth.at<float>(y + 3, x) - fov.depth.at<float>(y - 3, x)};
+}
+
+bool insideView(FieldOfView const& fov, Eigen::Vector2d const& x) {
+  int const u = static_cast<int>(std::lround(x.x())), v = static_cast<int>(std::lround(x.y()));
+  return u >= 0 && v >= 0 && u < fov.mask.cols && v < fov.mask.rows && fov.mask.at<std::uint8_t>(v, u) != 0;
+}
+
+std::optional<Eigen::Vector2d> walkToEdge(FieldOfView const& fov, Eigen::Vector2d p, Eigen::Vector2d const& dir, int max_steps,
+                                          bool* at_edge) {
+  if (at_edge) *at_edge = true;
+  int k = 0;
+  if (insideView(fov, p)) {
+    for (; k < max_steps && insideView(fov, p - dir); ++k) p -= dir;  // out to the edge
+    if (at_edge) *at_edge = k < max_steps;
+  } else {
+    for (; k < max_steps && !insideView(fov, p); ++k) p += dir;  // into the area
+    if (!insideView(fov, p)) return std::nullopt;
+  }
+  return p;
 }
 
 }  // namespace endo_guidance::core

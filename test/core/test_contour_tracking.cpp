@@ -66,7 +66,9 @@ TEST(ContourTracking, FollowsAPivotingShaftBetweenDetections) {
     if (k == 0) width0 = w;
     EXPECT_NEAR(w, 32.0, 2.0) << k;
     EXPECT_NEAR(w, width0, 0.3) << k;
-    if (res.tracked) EXPECT_TRUE(res.seeds.empty() && res.regions.empty());
+    if (res.tracked) {
+      EXPECT_TRUE(res.seeds.empty() && res.regions.empty());
+    }
   }
 }
 

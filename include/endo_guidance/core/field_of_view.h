@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <vector>
 
 namespace endo_guidance::core {
@@ -33,5 +34,15 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& param
 /// The inward direction at pixel p (clamped 3 px inside the image): the central difference of
 /// `depth` over +-3 px, unnormalised; zero where the depth is flat or unknown.
 Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p);
+
+/// Whether the pixel nearest to x (processing px) is inside the area.
+bool insideView(FieldOfView const& fov, Eigen::Vector2d const& x);
+
+/// Where a line leaves the area: from p (processing px), a point inside walks along -dir out to
+/// the area's edge, a point outside along +dir into the area, at most max_steps unit steps.
+/// Returns the last point inside (nullopt if the walk in never entered); `*at_edge`: false only
+/// when the walk out stopped at max_steps, still inside.
+std::optional<Eigen::Vector2d> walkToEdge(FieldOfView const& fov, Eigen::Vector2d p, Eigen::Vector2d const& dir, int max_steps,
+                                          bool* at_edge = nullptr);
 
 }  // namespace endo_guidance::core
