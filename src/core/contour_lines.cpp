@@ -30,6 +30,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kAlongBorder: return "runs along the field-of-view border instead of into the view";
     case ContourRejection::kLowContrast: return "not less chromatic than the tissue beside it (full resolution)";
     case ContourRejection::kWidthJump: return "tracked shaft's width changed too much since the last frame";
+    case ContourRejection::kDuplicate: return "a shaft already found";
   }
   return "unknown";
 }

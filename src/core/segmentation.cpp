@@ -37,6 +37,48 @@ void boxDownsample(cv::Mat const& src, int f, cv::Mat& dst) {
       }
   }
 }
+
+// Whether seeds a and b (on the region's boundary) are joined by a stretch of the boundary that
+// runs along the field-of-view edge (no deeper inside than the seeds, plus `margin` px): the two
+// are one entry.
+bool onOneBorderRun(Region const& r, FieldOfView const& fov, cv::Point a, cv::Point b, int margin) {
+  auto const& B = r.boundary;
+  int const n = static_cast<int>(B.size());
+  if (n == 0) return false;
+  auto nearest = [&](cv::Point q) {
+    int bi = 0;
+    double bd = 1e300;
+    for (int i = 0; i < n; ++i)
+      if (double const d = cv::norm(B[i] - q); d < bd) {
+        bd = d;
+        bi = i;
+      }
+    return bi;
+  };
+  float const level = std::max(fov.depth.at<float>(a), fov.depth.at<float>(b)) + static_cast<float>(margin);
+  auto onBorder = [&](cv::Point q) { return fov.depth.at<float>(q) <= level; };
+  int const ia = nearest(a), ib = nearest(b);
+  for (int step : {1, -1}) {
+    bool run = true;
+    for (int i = ia; i != ib && run; i = ((i + step) % n + n) % n) run = onBorder(B[i]);
+    if (run) return true;
+  }
+  return false;
+}
+
+// Whether contour c lies on one of the shafts already found: its axis within 5 deg of theirs, and
+// its entry and tip within half that shaft's width of its axis.
+bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found) {
+  ImageLine const a = imageAxis(c);
+  for (ApparentContour const& o : found) {
+    ImageLine const b = imageAxis(o);
+    if (std::abs(a.head<2>().dot(b.head<2>())) < std::cos(5.0 * M_PI / 180.0)) continue;
+    Eigen::Vector3d const e = o.entry_px.homogeneous();
+    double const half_width = 0.25 * (o.lines[0].dot(e) + o.lines[1].dot(e));
+    if (std::abs(b.dot(c.entry_px.homogeneous())) < half_width && std::abs(b.dot(c.tip_px.homogeneous())) < half_width) return true;
+  }
+  return false;
+}
 }  // namespace
 
 InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params) : params_(params), colour_(params.feature) {}
@@ -131,7 +173,19 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     Seed const& seed = res.seeds[si];
-    if (grower_.claimed(seed.position)) continue;
+    // A seed inside a region already refused for another seed (a shaft merged with a grey blob,
+    // a vessel or another instrument) would grow that region again; where it enters the view
+    // apart from that seed (not on the same stretch of the region's border), its own border run
+    // may still start a shaft's sides: only its strip search runs.
+    bool in_refused = false;
+    if (grower_.claimed(seed.position) && grower_.labels().at<std::uint8_t>(seed.position) == 255)
+      for (std::size_t ri = 0; ri < res.regions.size() && !in_refused; ++ri) {
+        Region const& r = res.regions[ri];
+        in_refused = res.region_status[ri] != ContourRejection::kNone && r.box.contains(seed.position) &&
+                     cv::pointPolygonTest(r.boundary, seed.position, false) >= 0 &&
+                     !onOneBorderRun(r, fov_, r.seed, seed.position, params_.contours.border_margin);
+      }
+    if (grower_.claimed(seed.position) && !(in_refused && params_.strip.enabled)) continue;
     // Grow at each threshold level; score each level's straight-line pair cheaply and refine the
     // best ones in full until one is accepted. In a video, a seed near last frame's entry of a
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
@@ -147,7 +201,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
       }
     Memory const* mem = remembered(seed);
-    if (mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
+    if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
       // (a seed whose regions all leaked has none to claim)
       if (auto r = mem->grown ? grower_.grow(seed.position, T[mem->level], si) : std::nullopt) {
         res.regions.push_back(*r);
@@ -246,7 +300,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     };
     std::vector<int> all(T.size());
     std::iota(all.begin(), all.end(), 0);
-    if (!best && mem && mem->accepted) {
+    if (in_refused) {
+      // strip search only (below)
+    } else if (!best && mem && mem->accepted) {
       std::vector<int> near;
       for (int d : {0, -1, 1})
         if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) near.push_back(mem->level + d);
@@ -266,11 +322,22 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // in the feature's gradient (strip_search.h), once per seed.
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(nullptr);
+    // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
+    // border run): the region is claimed, not reported.
+    if (best && duplicatesAShaft(*best_fit.contour, res.contours)) {
+      why = ContourRejection::kDuplicate;
+      smallest = std::move(best);
+      smallest_level = best_level;
+      best.reset();
+      best_strip.reset();
+    }
     if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
     else {
       int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
-      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, 0, strip_run ? 0 : age + elapsed,
-                            strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
+      // (a seed that only had its strip searched has had no full search: due at once next time)
+      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
+                            strip_run ? 0 : age + elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt,
+                            smallest.has_value()});
     }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;

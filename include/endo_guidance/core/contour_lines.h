@@ -49,7 +49,7 @@ struct ContourLinesParams {
 
 enum class ContourRejection {
   kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
-  kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump
+  kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump, kDuplicate
 };
 char const* toString(ContourRejection r);
 

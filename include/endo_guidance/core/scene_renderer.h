@@ -31,6 +31,8 @@ class SceneRenderer {
   /// BGR image of the given views (from SyntheticScene::frame), frame index k for animation.
   cv::Mat render(std::vector<SyntheticView> const& views, int k = 0) const;
   RenderOptions const& options() const { return options_; }
+  /// Coverage of the field of view (CV_32F, 1 inside, 0 outside, vignetting included).
+  cv::Mat const& fieldOfView() const { return fov_; }
 
  private:
   int width_, height_;
