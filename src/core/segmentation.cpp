@@ -67,15 +67,17 @@ bool onOneBorderRun(Region const& r, FieldOfView const& fov, cv::Point a, cv::Po
 }
 
 // Whether contour c lies on one of the shafts already found: its axis within 5 deg of theirs, and
-// its entry and tip within half that shaft's width of its axis.
+// its entry and tip (on its axis) within half that shaft's width of their axis. (Two instruments
+// side by side have axes a width apart.)
 bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found) {
   ImageLine const a = imageAxis(c);
+  Eigen::Vector3d const ce = footOnLine(a, c.entry_px).homogeneous(), ct = footOnLine(a, c.tip_px).homogeneous();
   for (ApparentContour const& o : found) {
     ImageLine const b = imageAxis(o);
     if (std::abs(a.head<2>().dot(b.head<2>())) < std::cos(5.0 * M_PI / 180.0)) continue;
     Eigen::Vector3d const e = o.entry_px.homogeneous();
-    double const half_width = 0.25 * (o.lines[0].dot(e) + o.lines[1].dot(e));
-    if (std::abs(b.dot(c.entry_px.homogeneous())) < half_width && std::abs(b.dot(c.tip_px.homogeneous())) < half_width) return true;
+    double const half_width = 0.5 * (o.lines[0].dot(e) + o.lines[1].dot(e));
+    if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
   }
   return false;
 }
@@ -322,17 +324,16 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // in the feature's gradient (strip_search.h), once per seed.
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(nullptr);
+    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
-    // border run): the region is claimed, not reported.
+    // border run): the region is claimed, not reported. Its memory stays that of a shaft, so that
+    // next frame this seed is searched again at once (the other seed may be gone by then).
     if (best && duplicatesAShaft(*best_fit.contour, res.contours)) {
       why = ContourRejection::kDuplicate;
       smallest = std::move(best);
-      smallest_level = best_level;
       best.reset();
-      best_strip.reset();
     }
-    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
-    else {
+    if (!best && why != ContourRejection::kDuplicate) {
       int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
       // (a seed that only had its strip searched has had no full search: due at once next time)
       memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
