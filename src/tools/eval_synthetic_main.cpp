@@ -164,6 +164,16 @@ Result run(Scene const& s, int frames, bool overlay, bool verbose, PipelineParam
         for (auto const& p : out.insertion_points)
           best = std::min(best, (p.estimate.position - scene.meanTrocar(static_cast<int>(i))).norm());
         R.trocar_mm.push_back(best * 1e3);
+        if (verbose) {
+          Eigen::Vector3d const t = scene.meanTrocar(static_cast<int>(i));
+          std::printf("  trocar %s instrument %zu: true mean (%.1f %.1f %.1f) mm, nearest estimate %.2f mm off\n", s.name.c_str(),
+                      i, 1e3 * t.x(), 1e3 * t.y(), 1e3 * t.z(), best * 1e3);
+          for (auto const& p : out.insertion_points)
+            if ((p.estimate.position - t).norm() <= best + 1e-12)
+              std::printf("    estimate (%.1f %.1f %.1f) mm, %zu views, rms %.2f mm, spread %.3f rad\n", 1e3 * p.estimate.position.x(),
+                          1e3 * p.estimate.position.y(), 1e3 * p.estimate.position.z(), p.estimate.views, 1e3 * p.estimate.rms_distance,
+                          p.estimate.conditioning);
+        }
       }
   }
   return R;
