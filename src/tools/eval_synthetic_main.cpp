@@ -233,6 +233,9 @@ int main(int argc, char** argv) {
     std::printf("%-15s %6.1f%% %8.3f %7.3fpx %7.3fpx %7.3f° %7.3f%% %7.2fmm %9d %12.2f %9d %5d(%d)\n", s.name.c_str(), found,
                 fpf, percentile(r.line_px, 0.5), percentile(r.line_px, 0.95), percentile(r.dir_deg, 0.5),
                 100 * percentile(r.dist_rel, 0.5), tro, r.false_late, percentile(r.latency_ms, 0.5), r.frames, r.cut, r.cut_found);
+    if (verbose)
+      std::printf("  %s: %d of %d visible shafts found, %d of %d with a line cut off; %d false in %d frames\n", s.name.c_str(), r.found,
+                  r.visible, r.cut_found, r.cut, r.false_shafts, r.frames);
     if (check) {
       bool const is_clean = s.name == "clean";
       double const min_found = s.name == "black_circular" ? 97.0 : 99.0;
