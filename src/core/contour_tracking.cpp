@@ -104,13 +104,19 @@ std::optional<double> tipAlongAxis(cv::Mat const& bgr, ApparentContour const& c,
 
 }  // namespace
 
-TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges) {
+TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                        cv::Mat const& bgr, ContourTrackingParams const& tp) {
   TrackedShaft s;
   s.contour = contour;
   s.edges = edges;
   Eigen::Vector2d const dir = axisDirection(contour);
   edgeExtent(edges, contour.entry_px, dir, &s.edge_start, &s.edge_end);
+  s.detected_edge_end = s.edge_end;
   s.tip_distance = std::max(0.0, dir.dot(contour.tip_px - contour.entry_px));
+  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(contour, contour.entry_px + s.tip_distance * dir));
+  s.chroma_tip = tipAlongAxis(bgr, contour, contour.entry_px, dir, s.edge_start, s.edge_end, s.tip_distance, reach)
+                     .value_or(s.tip_distance);
+  s.tip_offset = s.tip_distance - s.chroma_tip;
   return s;
 }
 
@@ -169,24 +175,36 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   // detection (the end of the edges jumped by up to 200 px on the robotic sequences, where
   // highlights break the edges and the wrist continues them); without contrast, it keeps its
   // distance from the entry. The fitted extent moves with it (insertion, withdrawal).
-  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + prev.tip_distance * dir));
-  auto const tip = tipAlongAxis(bgr, c, entry, dir, prev.edge_start, prev.edge_end, prev.tip_distance, reach);
-  now.tip_distance = tip ? *tip : prev.tip_distance;
+  // Last frame's distances along the axis, from the new entry: the entry moves along the axis
+  // (from the detection's point to where the axis leaves the view, or with the shaft), the tip
+  // does not move with it.
+  double const shift = dir.dot(e0 - entry);
+  double const edge_start = prev.edge_start + shift, edge_end = prev.edge_end + shift;
+  double const detected_edge_end = prev.detected_edge_end + shift;
+  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + (prev.tip_distance + shift) * dir));
+  // (searched about the tip, as at the detection: the search returns the first end it meets)
+  auto const tip = tipAlongAxis(bgr, c, entry, dir, edge_start, edge_end, prev.tip_distance + shift, reach);
+  now.chroma_tip = tip ? *tip : prev.chroma_tip + shift;
+  now.tip_offset = prev.tip_offset;
+  now.tip_distance = now.chroma_tip + now.tip_offset;
   // As in the detection (refineContour), beyond the end of the straight sides only the jaws may
-  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal.
+  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal. (The tip may stay
+  // where it was: the detection bounds it by the region's sides, which can end farther than the
+  // sub-pixel edges.)
   {
     double t_start = 0.0, t_sides = 0.0;
     edgeExtent(now.edges, entry, dir, &t_start, &t_sides);
     double const end_width = std::max(widthAt(c, entry + t_sides * dir), 2.0 * std::max(1, scale));
-    now.tip_distance = std::min(now.tip_distance, t_sides + 2.5 * end_width);
+    now.tip_distance = std::min(now.tip_distance, std::max(t_sides + 2.5 * end_width, prev.tip_distance + shift));
   }
-  // The fitted extent shrinks with a withdrawal but never grows past the detection's: grown with
-  // the tip, it took in the wrist beyond a robotic shaft (in line with it), whose edges then let
-  // the tip run on by a width per frame (Dataset 1: 263 -> 545 px in three frames). An inserted
-  // shaft's tip still follows, up to 2.5 widths beyond the edges, until the next detection.
-  now.edge_start = prev.edge_start;
-  now.edge_end = std::max(prev.edge_start + 0.5 * (prev.edge_end - prev.edge_start),
-                          std::min(now.tip_distance, prev.edge_end + std::min(0.0, now.tip_distance - prev.tip_distance)));
+  // The fitted extent is the detection's, cut at the tip (a withdrawal). Grown with the tip, it
+  // took in the wrist beyond a robotic shaft (in line with it), whose edges then let the tip run
+  // on by a width per frame (Dataset 1: 263 -> 545 px in three frames); shrunk by the tip's
+  // steps, it ratcheted down on a still image. An inserted shaft's tip still follows, up to 2.5
+  // widths beyond the edges, until the next detection.
+  now.edge_start = edge_start;
+  now.detected_edge_end = detected_edge_end;
+  now.edge_end = std::max(edge_start + 0.5 * (detected_edge_end - edge_start), std::min(now.tip_distance, detected_edge_end));
   c.entry_px = entry;
   c.tip_px = entry + now.tip_distance * dir;
   double const len = (c.tip_px - c.entry_px).norm();

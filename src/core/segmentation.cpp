@@ -382,7 +382,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   tracked_memory_.clear();
   if (params_.tracking.detect_every > 1)
     for (std::size_t i = 0; i < res.contours.size(); ++i) {
-      tracked_.push_back(startTrack(res.contours[i], res.edges[i]));
+      tracked_.push_back(startTrack(res.contours[i], res.edges[i], bgr, params_.tracking));
       tracked_memory_.push_back(contour_memory[i]);
     }
   tracked_size_ = bgr.size();
