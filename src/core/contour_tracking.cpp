@@ -171,10 +171,11 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
     auto const e = walkToEdge(*fov, (e0 - Eigen::Vector2d(off, off)) / sc, dir, 16, &at_edge);
     if (e && at_edge) entry = footOnLine(ax, *e * sc + Eigen::Vector2d(off, off));
   }
-  // The tip: where the shaft-like interior ends along the axis, as the region's end in the
-  // detection (the end of the edges jumped by up to 200 px on the robotic sequences, where
-  // highlights break the edges and the wrist continues them); without contrast, it keeps its
-  // distance from the entry. The fitted extent moves with it (insertion, withdrawal).
+  // The tip moves as the end of the shaft-like interior along the axis moves (the end of the
+  // edges jumped by up to 200 px on the robotic sequences, where highlights break the edges and
+  // the wrist continues them), from where the detection put it (tip_offset); without contrast it
+  // keeps its position. A chroma end beyond the search window (an offset larger than the reach)
+  // holds it too: the first end met is then the window's start, frame after frame.
   // Last frame's distances along the axis, from the new entry: the entry moves along the axis
   // (from the detection's point to where the axis leaves the view, or with the shaft), the tip
   // does not move with it.
