@@ -31,6 +31,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kLowContrast: return "not less chromatic than the tissue beside it (full resolution)";
     case ContourRejection::kWidthJump: return "tracked shaft's width changed too much since the last frame";
     case ContourRejection::kDuplicate: return "a shaft already found";
+    case ContourRejection::kWidens: return "widens toward the tip more than a shaft can";
   }
   return "unknown";
 }
@@ -511,11 +512,13 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   c.tip_px = tip;
   if ((tip - entry).norm() < p.min_length_px) return reject(ContourRejection::kTooShort);
   // Width where the shaft is seen: sum of the signed distances at entry and tip (both positive inside).
-  for (Eigen::Vector2d const& q : {entry, tip}) {
-    Eigen::Vector3d const x(q.x(), q.y(), 1.0);
-    double const w = c.lines[0].dot(x) + c.lines[1].dot(x);
-    if (w < p.min_width_px) return reject(ContourRejection::kTooThin);
+  double width_at[2];
+  for (int k = 0; k < 2; ++k) {
+    Eigen::Vector3d const x = (k == 0 ? entry : tip).homogeneous();
+    width_at[k] = c.lines[0].dot(x) + c.lines[1].dot(x);
+    if (width_at[k] < p.min_width_px) return reject(ContourRejection::kTooThin);
   }
+  if (p.max_widening > 0.0 && width_at[1] > p.max_widening * width_at[0]) return reject(ContourRejection::kWidens);
   // A shaft enters the view across its border: its direction (entry -> tip) must point inward,
   // not along the border (the inward normal is the gradient of the distance to the FOV edge).
   // The normal is taken where the axis itself leaves the view: near a corner the seed can lie on

@@ -230,3 +230,31 @@ TEST(Segmentation, AShaftWithTwoSeedsIsReportedOnce) {
   EXPECT_EQ(twice, 0);
   EXPECT_GE(found, shafts - 1);
 }
+
+// A grey wedge from the bottom border that widens toward its far end: 24 px at the border and
+// 36 px at the end (1.5x, a shaft pointing toward the camera) is a shaft; 20 px to 60 px (3x) is
+// not (a dark wedge in a corner, robotic Dataset 2), and is refused as widening.
+TEST(Segmentation, AWedgeWideningThreefoldIsNotAShaft) {
+  auto wedge = [](double w_border, double w_end) {
+    cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+    std::vector<cv::Point> poly{{static_cast<int>(320 - w_border / 2), 479}, {static_cast<int>(320 + w_border / 2), 479},
+                                {static_cast<int>(320 + w_end / 2), 260}, {static_cast<int>(320 - w_end / 2), 260}};
+    cv::fillConvexPoly(im, poly, cv::Scalar(110, 110, 110), cv::LINE_AA);
+    return im;
+  };
+  SegmentationParams p;
+  {
+    InstrumentSegmenter seg(p);
+    EXPECT_EQ(seg.process(wedge(24.0, 36.0)).contours.size(), 1u);
+  }
+  InstrumentSegmenter seg(p);
+  auto const res = seg.process(wedge(20.0, 60.0));
+  EXPECT_TRUE(res.contours.empty());
+  bool widens = false;
+  for (auto const& st : res.region_status) widens |= st == ContourRejection::kWidens;
+  EXPECT_TRUE(widens);
+  // Without the bound, the same wedge is taken for a shaft.
+  p.contours.max_widening = 0.0;
+  InstrumentSegmenter unbounded(p);
+  EXPECT_EQ(unbounded.process(wedge(20.0, 60.0)).contours.size(), 1u);
+}

@@ -52,6 +52,8 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.seeds.threshold, defaults.segmentation.seeds.threshold);
   EXPECT_EQ(shipped.segmentation.contours.max_residual_px, defaults.segmentation.contours.max_residual_px);
   EXPECT_EQ(shipped.segmentation.contours.min_fill, defaults.segmentation.contours.min_fill);
+  EXPECT_EQ(shipped.segmentation.contours.min_elongation, defaults.segmentation.contours.min_elongation);
+  EXPECT_EQ(shipped.segmentation.contours.max_widening, defaults.segmentation.contours.max_widening);
   EXPECT_EQ(shipped.segmentation.sigma_delta, defaults.segmentation.sigma_delta);
   EXPECT_EQ(shipped.insertion_points.tracker.memory_views, defaults.insertion_points.tracker.memory_views);
   EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
