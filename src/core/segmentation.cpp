@@ -179,15 +179,16 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // a vessel or another instrument) would grow that region again; where it enters the view
     // apart from that seed (not on the same stretch of the region's border), its own border run
     // may still start a shaft's sides: only its strip search runs.
+    bool const claimed = grower_.claimed(seed.position);
     bool in_refused = false;
-    if (grower_.claimed(seed.position) && grower_.labels().at<std::uint8_t>(seed.position) == 255)
+    if (claimed && params_.strip.enabled && grower_.labels().at<std::uint8_t>(seed.position) == 255)
       for (std::size_t ri = 0; ri < res.regions.size() && !in_refused; ++ri) {
         Region const& r = res.regions[ri];
         in_refused = res.region_status[ri] != ContourRejection::kNone && r.box.contains(seed.position) &&
                      cv::pointPolygonTest(r.boundary, seed.position, false) >= 0 &&
                      !onOneBorderRun(r, fov_, r.seed, seed.position, params_.contours.border_margin);
       }
-    if (grower_.claimed(seed.position) && !(in_refused && params_.strip.enabled)) continue;
+    if (claimed && !in_refused) continue;
     // Grow at each threshold level; score each level's straight-line pair cheaply and refine the
     // best ones in full until one is accepted. In a video, a seed near last frame's entry of a
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
