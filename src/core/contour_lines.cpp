@@ -526,8 +526,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   // the bottom seeds on the bottom). The exit is searched within two widths of the entry, so a
   // band along the border (vignetted rim) still meets the border it runs along.
   {
-    Eigen::Vector3d const em(entry.x(), entry.y(), 1.0);
-    double const w_proc = std::max(1.0, (c.lines[0].dot(em) + c.lines[1].dot(em)) / scale);
+    double const w_proc = std::max(1.0, width_at[0] / scale);
     auto const ax = footOnLine(imageAxis(c), entry);
     int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
     Eigen::Vector2d const q = walkToEdge(fov, (ax - Eigen::Vector2d(off, off)) / scale, axis_dir, kmax)
@@ -540,8 +539,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   // is elongated. Tissue blobs that happen to have two straight-ish sides fail here.
   {
     double const len = (tip - entry).norm();
-    Eigen::Vector3d const em(entry.x(), entry.y(), 1.0), tm(tip.x(), tip.y(), 1.0);
-    double const width = 0.5 * (c.lines[0].dot(em) + c.lines[1].dot(em) + c.lines[0].dot(tm) + c.lines[1].dot(tm));
+    double const width = 0.5 * (width_at[0] + width_at[1]);
     if (len < p.min_elongation * width) return reject(ContourRejection::kNotElongated);
     // Rasterise at processing scale over the region's box (plus margin).
     cv::Rect const box = region.box + cv::Size(4, 4) - cv::Point(2, 2);
