@@ -62,7 +62,7 @@ std::optional<Eigen::Vector3d> fitLineLS(std::vector<Eigen::Vector2d> const& pts
 
 // Residual, inliers and covariance of the line l fitted to weighted points (weight 0 = outlier).
 std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<Eigen::Vector2d> const& pts,
-                                         std::vector<double> const& w, int min_points) {
+                                         std::vector<double> const& w, int min_points, double sigma_floor_px) {
   RefinedLine out;
   out.line = l;
   double sw = 0.0, ss = 0.0, st = 0.0, st2 = 0.0;
@@ -89,7 +89,13 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
   out.residual_px = std::sqrt(ss / sw);
   out.points = used;
   double const s2 = std::max(out.residual_px * out.residual_px, 0.01 * 0.01) * used / std::max(1, used - 2);
-  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw), s2 / used);
+  // The residuals give the independent part of the error (s2 / n); a systematic error of
+  // sigma_floor at each end of the line, common to its points (compression blocks, shading, the
+  // jaws' outline), adds sigma_floor^2 / 2 to the offset and 2 sigma_floor^2 / L^2 to the angle,
+  // L^2 = 12 var(t) the extent of the points.
+  double const f2 = sigma_floor_px * sigma_floor_px, L2 = 12.0 * st / std::max(st2, 1e-9);
+  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw) + 2.0 * f2 / std::max(L2, 1.0),
+                                  s2 / used + 0.5 * f2);
   return out;
 }
 
@@ -293,7 +299,7 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
     }
   }
   if (l.head<2>().dot(n) < 0.0) l = -l;  // keep the shaft on the positive side
-  return summarizeLine(l, pts, w, p.min_edge_points);
+  return summarizeLine(l, pts, w, p.min_edge_points, p.line_sigma_floor_px);
 }
 
 namespace {
@@ -608,7 +614,7 @@ ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::
 std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
                                               std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
                                               std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
-                                              int min_points) {
+                                              int min_points, double sigma_floor_px) {
   ApparentContour out = contour;
   out.entry_px = rectify(contour.entry_px);
   out.tip_px = rectify(contour.tip_px);
@@ -627,7 +633,7 @@ std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
     auto l = fitLineLS(pts);
     if (!l) return std::nullopt;
     if (l->head<2>().dot(inside) + l->z() < 0.0) *l = -*l;
-    auto const r = summarizeLine(*l, pts, std::vector<double>(pts.size(), 1.0), min_points);
+    auto const r = summarizeLine(*l, pts, std::vector<double>(pts.size(), 1.0), min_points, sigma_floor_px);
     if (!r) return std::nullopt;
     out.lines[s] = r->line;
     out.line_covariances[s] = r->covariance;

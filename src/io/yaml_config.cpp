@@ -101,6 +101,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/min_length_px", d(S.contours.min_length_px)},
       {"segmentation/max_residual_px", d(S.contours.max_residual_px)},
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
+      {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
       {"segmentation/min_fill", d(S.contours.min_fill)},
       {"segmentation/min_elongation", d(S.contours.min_elongation)},
       {"segmentation/max_widening", d(S.contours.max_widening)},

@@ -208,7 +208,9 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
     }
     std::vector<core::ApparentContour> rectified;
     for (std::size_t i = 0; i < contours.size(); ++i)
-      if (auto r = core::rectifyContour(contours[i], seg.edges[i], rectify_)) rectified.push_back(*r);
+      if (auto r = core::rectifyContour(contours[i], seg.edges[i], rectify_, params_.segmentation.contours.min_edge_points,
+                                        params_.segmentation.contours.line_sigma_floor_px))
+        rectified.push_back(*r);
     contours.swap(rectified);
   }
   tracker_.assign(contours);

@@ -58,6 +58,20 @@ TEST(ContourLines, SubpixelEdgeOfAnAntiAliasedStep) {
   EXPECT_GT(r->line.head<2>().dot(edge.head<2>()), 0.99);  // orientation kept
   EXPECT_LT(r->residual_px, 0.05);
   EXPECT_GT(r->covariance.trace(), 0.0);
+  // The covariance: the residuals' part is tiny on this clean step; the systematic floor gives
+  // each end of the line a standard deviation of line_sigma_floor_px across it.
+  for (double floor : {0.0, 0.25}) {
+    ContourLinesParams pf = p;
+    pf.line_sigma_floor_px = floor;
+    auto const rf = refineLineSubpixel(img, r0->line, 5.0, 95.0, pf);
+    ASSERT_TRUE(rf);
+    for (double y : {5.0, 95.0}) {
+      Eigen::Vector3d const end(-(rf->line.y() * y + rf->line.z()) / rf->line.x(), y, 1.0);
+      double const sd = std::sqrt(end.dot(rf->covariance * end));  // of the line's distance at the end
+      if (floor > 0.0) EXPECT_NEAR(sd, floor, 0.03) << "y " << y;
+      else EXPECT_LT(sd, 0.03) << "y " << y;
+    }
+  }
   // A flat image has no edge.
   cv::Mat flat(100, 100, CV_8UC3, cv::Scalar(60, 70, 170));
   EXPECT_FALSE(refineLineSubpixel(flat, start, 5.0, 95.0, p));

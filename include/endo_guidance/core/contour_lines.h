@@ -36,6 +36,12 @@ struct ContourLinesParams {
                                               ///< takes a brightness drop this steep (0: never; 8 found
                                               ///< 1 more in-vivo shaft but cost 0.25 px of line accuracy)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
+  double line_sigma_floor_px = 0.25;  ///< px: systematic error at each end of a line, added to the covariance
+                                      ///< the residuals give. They miss the errors common to the edge points
+                                      ///< (compression, shading): on the rendered scenes the axes' distances to
+                                      ///< their trocar were 2-4x their predicted sigma, and their weights in the
+                                      ///< trocar estimate mis-ranked (0 -> 0.25: trocars 0.22 -> 0.04 mm clean,
+                                      ///< 2.70 -> 1.36 mm for the best-seen one of the hard scene)
   double max_residual_px = 3.0;   ///< RMS of the sub-pixel edge points to their line
   double min_elongation = 2.0;    ///< length (entry to tip) over mean width
   double max_widening = 2.0;      ///< width at the tip over width at the entry: a shaft pointing toward the
@@ -121,10 +127,11 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
 /// points mapped by `rectify` (distorted pixel -> pixel of the rectified camera), the entry and
 /// tip mapped too. The image is never remapped: a straight shaft edge is a curve in the
 /// distorted image and a line again after the mapping. nullopt when a side keeps fewer than
-/// min_points mapped points or the refitted lines cross.
+/// min_points mapped points or the refitted lines cross. `sigma_floor_px`: as
+/// ContourLinesParams::line_sigma_floor_px.
 std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
                                               std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
                                               std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
-                                              int min_points = 8);
+                                              int min_points = 8, double sigma_floor_px = 0.25);
 
 }  // namespace endo_guidance::core
