@@ -54,7 +54,11 @@ double InsertionPointTracker::gate(PluckerLine const& axis, AxisCovariance const
   if (!initialized_ || !estimate_.ok()) return std::numeric_limits<double>::infinity();
   Eigen::Matrix3d const P = Eigen::Matrix3d::Identity() - axis.direction() * axis.direction().transpose();
   double const across = (P * estimate_.covariance * P).trace();  // the estimate's variance across the axis
-  double const own = residualCovariance(axis, cov, estimate_.position).trace();
+  // The axis's own uncertainty widens the gate only up to the default gate: an axis that cannot
+  // be placed within gate_distance of the point adds little to it, and a mis-segmented short shaft
+  // (lines along its open jaws: 7-11 deg off, with a wide covariance) would be attached.
+  double const own_max = options_.gate_distance / std::max(options_.gate_sigmas, 1e-9);
+  double const own = std::min(residualCovariance(axis, cov, estimate_.position).trace(), own_max * own_max);
   double const rms2 = estimate_.rms_distance * estimate_.rms_distance;
   double const spread = std::sqrt(std::max(rms2, own) + std::max(0.0, across));
   return std::clamp(options_.gate_sigmas * spread, options_.gate_distance,

@@ -222,6 +222,23 @@ TEST(InsertionPointTracker, OutlierStreamAndRelocation) {
   EXPECT_TRUE(std::isinf(t.distanceTo(good[0])));
 }
 
+TEST(InsertionPointTracker, AnUncertainAxisDoesNotWidenTheGate) {
+  // Exact axes through the point: its spread is nil, and the gate is the default one. An axis
+  // whose own covariance is wide at the point (a short shaft) does not widen it to gate_max: a
+  // mis-segmented short shaft (lines along its open jaws, 7-11 deg off) was attached that way.
+  std::mt19937_64 rng(9);
+  InsertionPointTracker t;
+  for (auto const& a : axesThrough(kTrocar, 60, rng)) t.update(a);
+  ASSERT_TRUE(t.estimate().ok());
+  InsertionPointTrackerOptions const o;
+  PluckerLine const probe = axesThrough(kTrocar, 1, rng)[0];
+  AxisCovariance const precise = AxisCovariance::Identity() * 1e-12;
+  AxisCovariance const wide = AxisCovariance::Identity() * 1e-2;  // 0.1 rad, 0.1 m: 1 cm and more at the point
+  EXPECT_NEAR(t.gate(probe, precise), o.gate_distance, 1e-6);
+  EXPECT_LT(t.gate(probe, wide), 1.05 * o.gate_distance);
+  EXPECT_LT(t.gate(probe, wide), 0.5 * o.gate_max);
+}
+
 TEST(InsertionPointSet, DiscoversThreeTrocarsAndAttaches) {
   SyntheticSceneOptions so;
   so.line_noise_px = 0.2;
