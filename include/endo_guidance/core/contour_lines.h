@@ -132,6 +132,6 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
 std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
                                               std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
                                               std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
-                                              int min_points = 8, double sigma_floor_px = 0.25);
+                                              int min_points = 8, double sigma_floor_px = ContourLinesParams{}.line_sigma_floor_px);
 
 }  // namespace endo_guidance::core
