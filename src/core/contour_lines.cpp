@@ -65,7 +65,7 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
                                          std::vector<double> const& w, int min_points, double sigma_floor_px) {
   RefinedLine out;
   out.line = l;
-  double sw = 0.0, ss = 0.0, st = 0.0, st2 = 0.0;
+  double sw = 0.0, ss = 0.0, st = 0.0;
   Eigen::Vector2d c = Eigen::Vector2d::Zero();
   int used = 0;
   for (std::size_t i = 0; i < pts.size(); ++i) {
@@ -84,7 +84,6 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
     if (w[i] > 0.0) {
       double const t = ld.dot(pts[i] - c);
       st += w[i] * t * t;
-      st2 += w[i];
     }
   out.residual_px = std::sqrt(ss / sw);
   out.points = used;
@@ -93,9 +92,8 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
   // sigma_floor at each end of the line, common to its points (compression blocks, shading, the
   // jaws' outline), adds sigma_floor^2 / 2 to the offset and 2 sigma_floor^2 / L^2 to the angle,
   // L^2 = 12 var(t) the extent of the points.
-  double const f2 = sigma_floor_px * sigma_floor_px, L2 = 12.0 * st / std::max(st2, 1e-9);
-  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) * (st2 / sw) + 2.0 * f2 / std::max(L2, 1.0),
-                                  s2 / used + 0.5 * f2);
+  double const f2 = sigma_floor_px * sigma_floor_px, L2 = 12.0 * st / sw;
+  out.covariance = lineCovariance(l, c, s2 / std::max(st, 1e-9) + 2.0 * f2 / std::max(L2, 1.0), s2 / used + 0.5 * f2);
   return out;
 }
 
