@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cstdint>
 #include <opencv2/core.hpp>
-#include <vector>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -14,35 +13,23 @@ namespace endo_guidance::core {
 
 namespace {
 
-// One window offset over a row: where |q - c| <= d, add q to the 16-bit sum and 1 to the count.
-void accumulate(std::uint8_t const* __restrict c, std::uint8_t const* __restrict q, std::uint16_t* __restrict s,
-                std::uint8_t* __restrict k, int W, std::uint8_t d) {
-  int x = 0;
-#if defined(__SSE2__)
-  __m128i const dv = _mm_set1_epi8(static_cast<char>(d));
-  __m128i const one = _mm_set1_epi8(1);
-  __m128i const zero = _mm_setzero_si128();
-  for (; x + 16 <= W; x += 16) {
-    __m128i const a = _mm_loadu_si128(reinterpret_cast<__m128i const*>(c + x));
-    __m128i const b = _mm_loadu_si128(reinterpret_cast<__m128i const*>(q + x));
-    __m128i const ad = _mm_or_si128(_mm_subs_epu8(a, b), _mm_subs_epu8(b, a));  // |a - b|
-    __m128i const m = _mm_cmpeq_epi8(_mm_min_epu8(ad, dv), ad);                 // |a - b| <= d
-    __m128i const bm = _mm_and_si128(b, m);
-    __m128i* sp = reinterpret_cast<__m128i*>(s + x);
-    _mm_storeu_si128(sp, _mm_add_epi16(_mm_loadu_si128(sp), _mm_unpacklo_epi8(bm, zero)));
-    _mm_storeu_si128(sp + 1, _mm_add_epi16(_mm_loadu_si128(sp + 1), _mm_unpackhi_epi8(bm, zero)));
-    __m128i* kp = reinterpret_cast<__m128i*>(k + x);
-    _mm_storeu_si128(kp, _mm_add_epi8(_mm_loadu_si128(kp), _mm_and_si128(m, one)));
-  }
-#endif
-  for (; x < W; ++x) {
-    std::uint8_t const a = c[x], b = q[x];
-    std::uint8_t const ad = a > b ? a - b : b - a;
-    if (ad <= d) {
-      s[x] = static_cast<std::uint16_t>(s[x] + b);
-      ++k[x];
+// The mean rounded half up, floor(sum / n + 1/2) = floor((2 sum + n) / (2 n)), as in the
+// definition (n >= 1: the centre is always in).
+inline std::uint8_t roundedMean(int sum, int n) { return static_cast<std::uint8_t>((2 * sum + n) / (2 * n)); }
+
+// One output pixel from the padded rows (scalar: the tail of a row).
+inline std::uint8_t filterPixel(std::uint8_t const* const* rows, int x, int R, int d) {
+  int const c = rows[R][x];
+  int sum = 0, n = 0;
+  for (int dy = 0; dy <= 2 * R; ++dy)
+    for (int dx = -R; dx <= R; ++dx) {
+      int const q = rows[dy][x + dx];
+      if (std::abs(q - c) <= d) {
+        sum += q;
+        ++n;
+      }
     }
-  }
+  return roundedMean(sum, n);
 }
 
 }  // namespace
@@ -54,23 +41,46 @@ void sigmaFilter(cv::Mat const& src, cv::Mat& dst, int radius, int delta) {
   cv::Mat pad;
   cv::copyMakeBorder(src, pad, R, R, R, R, cv::BORDER_REPLICATE);
   dst.create(src.size(), CV_8U);
-  int const n = (2 * R + 1) * (2 * R + 1);  // <= 49: counts fit in 8 bits, sums in 16
-  // Reciprocals in 16.16 fixed point: mean = (sum * inv[cnt] + 2^15) >> 16 (cnt >= 1: the centre).
-  std::vector<std::uint32_t> inv(static_cast<std::size_t>(n) + 1, 0);
-  for (int c = 1; c <= n; ++c) inv[c] = static_cast<std::uint32_t>((65536u + c / 2) / c);
-  std::vector<std::uint16_t> sum(static_cast<std::size_t>(W));
-  std::vector<std::uint8_t> cnt(static_cast<std::size_t>(W));
-  std::uint8_t const d = static_cast<std::uint8_t>(std::min(delta, 255));
+  int const d = std::min(delta, 255);
+  std::uint8_t const* rows[7];
   for (int y = 0; y < H; ++y) {
-    std::uint8_t const* c = pad.ptr<std::uint8_t>(y + R) + R;
-    std::fill(sum.begin(), sum.end(), 0);
-    std::fill(cnt.begin(), cnt.end(), 0);
-    for (int dy = -R; dy <= R; ++dy) {
-      std::uint8_t const* row = pad.ptr<std::uint8_t>(y + R + dy) + R;
-      for (int dx = -R; dx <= R; ++dx) accumulate(c, row + dx, sum.data(), cnt.data(), W, d);
-    }
+    for (int dy = 0; dy <= 2 * R; ++dy) rows[dy] = pad.ptr<std::uint8_t>(y + dy) + R;
     std::uint8_t* o = dst.ptr<std::uint8_t>(y);
-    for (int x = 0; x < W; ++x) o[x] = static_cast<std::uint8_t>((sum[x] * inv[cnt[x]] + 32768u) >> 16);
+    int x = 0;
+#if defined(__SSE2__)
+    // 16 pixels at a time, the whole window in registers: per offset, |q - c| <= d selects q
+    // into 16-bit sums and 1 into 8-bit counts (n <= 49); then the rounded mean in float,
+    // which is exact here: 2 sum + n < 2^15, and a non-integer quotient is >= 1 / (2 n) from
+    // the next integer, far above float's rounding error, so truncation gives the floor.
+    __m128i const dv = _mm_set1_epi8(static_cast<char>(d));
+    __m128i const zero = _mm_setzero_si128();
+    for (; x + 16 <= W; x += 16) {
+      __m128i const c = _mm_loadu_si128(reinterpret_cast<__m128i const*>(rows[R] + x));
+      __m128i slo = zero, shi = zero, cnt = zero;
+      for (int dy = 0; dy <= 2 * R; ++dy)
+        for (int dx = -R; dx <= R; ++dx) {
+          __m128i const q = _mm_loadu_si128(reinterpret_cast<__m128i const*>(rows[dy] + x + dx));
+          __m128i const ad = _mm_or_si128(_mm_subs_epu8(c, q), _mm_subs_epu8(q, c));  // |c - q|
+          __m128i const m = _mm_cmpeq_epi8(_mm_min_epu8(ad, dv), ad);                 // |c - q| <= d
+          __m128i const qm = _mm_and_si128(q, m);
+          slo = _mm_add_epi16(slo, _mm_unpacklo_epi8(qm, zero));
+          shi = _mm_add_epi16(shi, _mm_unpackhi_epi8(qm, zero));
+          cnt = _mm_sub_epi8(cnt, m);  // m = -1 where selected
+        }
+      __m128i const nlo = _mm_unpacklo_epi8(cnt, zero), nhi = _mm_unpackhi_epi8(cnt, zero);
+      auto mean4 = [&](__m128i s16, __m128i n16, bool hi) {
+        __m128i const s32 = hi ? _mm_unpackhi_epi16(s16, zero) : _mm_unpacklo_epi16(s16, zero);
+        __m128i const n32 = hi ? _mm_unpackhi_epi16(n16, zero) : _mm_unpacklo_epi16(n16, zero);
+        __m128 const num = _mm_cvtepi32_ps(_mm_add_epi32(_mm_add_epi32(s32, s32), n32));
+        __m128 const den = _mm_cvtepi32_ps(_mm_add_epi32(n32, n32));
+        return _mm_cvttps_epi32(_mm_div_ps(num, den));
+      };
+      __m128i const m0 = _mm_packs_epi32(mean4(slo, nlo, false), mean4(slo, nlo, true));
+      __m128i const m1 = _mm_packs_epi32(mean4(shi, nhi, false), mean4(shi, nhi, true));
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(o + x), _mm_packus_epi16(m0, m1));
+    }
+#endif
+    for (; x < W; ++x) o[x] = filterPixel(rows, x, R, d);
   }
 }
 

@@ -31,15 +31,22 @@ cv::Mat reference(cv::Mat const& src, int R, int delta) {
 }  // namespace
 
 TEST(SigmaFilter, MatchesTheDefinition) {
-  cv::Mat img(37, 53, CV_8U);
-  cv::randu(img, 0, 256);
-  for (int R : {1, 2, 3})
-    for (int delta : {0, 5, 20, 255}) {
-      cv::Mat out;
-      sigmaFilter(img, out, R, delta);
-      cv::Mat const ref = reference(img, R, delta);
-      EXPECT_LE(cv::norm(out, ref, cv::NORM_INF), 1.0) << "R " << R << " delta " << delta;  // rounding
-    }
+  // Widths with and without a tail after the 16-pixel blocks; random values, and a smooth ramp
+  // (many windows whose mean is exactly half-way: the rounding must be half up, as defined).
+  for (int w : {53, 64, 5}) {
+    cv::Mat img(37, w, CV_8U), ramp(37, w, CV_8U);
+    cv::randu(img, 0, 256);
+    for (int y = 0; y < ramp.rows; ++y)
+      for (int x = 0; x < ramp.cols; ++x) ramp.at<std::uint8_t>(y, x) = static_cast<std::uint8_t>((3 * x + 5 * y) % 256);
+    for (cv::Mat const* m : {&img, &ramp})
+      for (int R : {1, 2, 3})
+        for (int delta : {0, 5, 20, 255}) {
+          cv::Mat out;
+          sigmaFilter(*m, out, R, delta);
+          cv::Mat const ref = reference(*m, R, delta);
+          EXPECT_EQ(cv::norm(out, ref, cv::NORM_INF), 0.0) << "width " << w << " R " << R << " delta " << delta;
+        }
+  }
 }
 
 TEST(SigmaFilter, KeepsEdgesAndSmoothsNoise) {
