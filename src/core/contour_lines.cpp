@@ -32,6 +32,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kWidthJump: return "tracked shaft's width changed too much since the last frame";
     case ContourRejection::kDuplicate: return "a shaft already found";
     case ContourRejection::kWidens: return "widens toward the tip more than a shaft can";
+    case ContourRejection::kGlare: return "mostly glare between its lines (near white, achromatic)";
   }
   return "unknown";
 }
@@ -642,6 +643,33 @@ std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
   Eigen::Vector3d const in(inside.x(), inside.y(), 1.0);
   if (!(out.lines[0].dot(in) > 0.0 && out.lines[1].dot(in) > 0.0)) return std::nullopt;
   return out;
+}
+
+AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& c) {
+  CV_Assert(bgr.type() == CV_8UC3);
+  AcrossSamples s;
+  Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
+  auto at = [&](Eigen::Vector2d const& q, std::vector<float>& v, bool inside) {
+    int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
+    if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
+    cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
+    v.push_back(ColourFeature::chroma(px[0], px[1], px[2]));
+    if (inside && std::max({px[0], px[1], px[2]}) >= 230 && v.back() < 30.f) ++s.glare;
+  };
+  for (int i = 1; i < 40; ++i) {
+    Eigen::Vector2d const m = e + (i / 40.0) * ax;
+    Eigen::Vector2d const f0 = footOnLine(c.lines[0], m), f1 = footOnLine(c.lines[1], m);
+    double const d = std::max(3.0, 0.3 * (f1 - f0).norm());
+    for (double f : {0.25, 0.5, 0.75}) at(f0 + f * (f1 - f0), s.inside, true);
+    at(f0 - d * c.lines[0].head<2>(), s.outside[0], false);  // the normals point into the shaft
+    at(f1 - d * c.lines[1].head<2>(), s.outside[1], false);
+  }
+  return s;
+}
+
+bool mostlyGlare(cv::Mat const& bgr, ApparentContour const& contour, ContourLinesParams const& p) {
+  AcrossSamples const s = acrossContour(bgr, contour);
+  return !s.inside.empty() && s.glare > p.max_glare_fraction * static_cast<double>(s.inside.size());
 }
 
 }  // namespace endo_guidance::core

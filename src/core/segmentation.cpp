@@ -108,8 +108,10 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
   std::vector<TrackedShaft> now;
   for (TrackedShaft const& t : tracked_) {
     TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
-    // Lost, or no longer less chromatic than the tissue beside it: this is a detection frame.
-    if (!r.shaft || !stripContrastFullRes(bgr, r.shaft->contour, params_.strip)) return std::nullopt;
+    // Lost, no longer less chromatic than the tissue beside it, or now glare: this is a detection frame.
+    if (!r.shaft || !stripContrastFullRes(bgr, r.shaft->contour, params_.strip) ||
+        mostlyGlare(bgr, r.shaft->contour, params_.contours))
+      return std::nullopt;
     now.push_back(std::move(*r.shaft));
   }
   // Two tracks that converged on one shaft (its double detection: shaft and shadow, or two
@@ -240,6 +242,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         f.contour.reset();
         f.rejection = ContourRejection::kLowContrast;
       }
+      if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
+        f.contour.reset();
+        f.rejection = ContourRejection::kGlare;
+      }
       if (!f.contour) {
         why = f.rejection;
         return;
@@ -291,6 +297,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
       for (auto& cd : cands) {
         ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
+        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
+          f.contour.reset();
+          f.rejection = ContourRejection::kGlare;
+        }
         if (f.contour) {
           best = std::move(cd.region);
           best_fit = std::move(f);

@@ -7,7 +7,6 @@
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
-#include "endo_guidance/core/colour_feature.h"
 
 namespace endo_guidance::core {
 
@@ -311,25 +310,10 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
 }
 
 bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p) {
-  CV_Assert(bgr.type() == CV_8UC3);
-  Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
-  std::vector<float> in, out[2];
-  int specular = 0;  // near-white samples inside: highlights
-  auto at = [&](Eigen::Vector2d const& q, std::vector<float>& v) {
-    int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-    if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
-    cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
-    v.push_back(ColourFeature::chroma(px[0], px[1], px[2]));
-    if (&v == &in && std::max({px[0], px[1], px[2]}) >= 230 && v.back() < 30.f) ++specular;
-  };
-  for (int i = 1; i < 40; ++i) {
-    Eigen::Vector2d const m = e + (i / 40.0) * ax;
-    Eigen::Vector2d const f0 = footOnLine(c.lines[0], m), f1 = footOnLine(c.lines[1], m);
-    double const d = std::max(3.0, 0.3 * (f1 - f0).norm());
-    for (double f : {0.25, 0.5, 0.75}) at(f0 + f * (f1 - f0), in);
-    at(f0 - d * c.lines[0].head<2>(), out[0]);  // the normals point into the shaft
-    at(f1 - d * c.lines[1].head<2>(), out[1]);
-  }
+  AcrossSamples s = acrossContour(bgr, c);
+  auto& in = s.inside;
+  auto& out = s.outside;
+  int const specular = s.glare;  // near-white samples inside: highlights
   if (in.empty()) return false;
   // A weakly contrasted strip is a shaft only if matte: a band of highlights on wet tissue is not.
   double const mi = median(in);

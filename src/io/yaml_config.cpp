@@ -105,6 +105,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/min_fill", d(S.contours.min_fill)},
       {"segmentation/min_elongation", d(S.contours.min_elongation)},
       {"segmentation/max_widening", d(S.contours.max_widening)},
+      {"segmentation/max_glare_fraction", d(S.contours.max_glare_fraction)},
       {"segmentation/level_memory_px", i(S.level_memory_px)},
       {"segmentation/full_search_every", i(S.full_search_every)},
       {"segmentation/strip_search_max_every", i(S.strip_search_max_every)},

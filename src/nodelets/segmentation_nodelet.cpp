@@ -94,6 +94,7 @@ void SegmentationNodelet::onInit() {
   c.min_fill = S.contours.min_fill;
   c.min_elongation = S.contours.min_elongation;
   c.max_widening = S.contours.max_widening;
+  c.max_glare_fraction = S.contours.max_glare_fraction;
   c.strip_search = S.strip.enabled;
   c.strip_max_inside_outside_ratio = S.strip.max_inside_outside_ratio;
   c.max_regions = S.regions.max_regions;
@@ -148,6 +149,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.contours.min_fill = c.min_fill;
   S.contours.min_elongation = c.min_elongation;
   S.contours.max_widening = c.max_widening;
+  S.contours.max_glare_fraction = c.max_glare_fraction;
   S.strip.enabled = c.strip_search;
   S.strip.max_inside_outside_ratio = c.strip_max_inside_outside_ratio;
   S.regions.max_regions = c.max_regions;

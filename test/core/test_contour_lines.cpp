@@ -155,3 +155,54 @@ TEST(ContourLines, RectifiedContourOfDistortedEdgesIsTheStraightLine) {
   std::array<std::vector<Eigen::Vector2d>, 2> few{std::vector<Eigen::Vector2d>(edges[0].begin(), edges[0].begin() + 3), edges[1]};
   EXPECT_FALSE(rectifyContour(distorted, few, rectify));
 }
+
+// A strip between two vertical lines, x in [100, 140], from the bottom border (entry) up to
+// y = 60 (tip), on red tissue; `fill` paints its inside.
+namespace {
+ApparentContour verticalStrip() {
+  ApparentContour c;
+  c.lines = {ImageLine(1.0, 0.0, -100.0), ImageLine(-1.0, 0.0, 140.0)};  // normals into the strip
+  c.entry_px = Eigen::Vector2d(120.0, 239.0);
+  c.tip_px = Eigen::Vector2d(120.0, 60.0);
+  return c;
+}
+}  // namespace
+
+TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
+  ContourLinesParams const p;  // max_glare_fraction 0.5
+  ApparentContour const c = verticalStrip();
+  cv::Mat img(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));  // BGR: red tissue
+  // A grey shaft with one highlight streak along it (a sixth of its width): a shaft.
+  cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
+  cv::rectangle(img, cv::Point(117, 0), cv::Point(123, 239), cv::Scalar(250, 250, 250), cv::FILLED);
+  AcrossSamples s = acrossContour(img, c);
+  EXPECT_EQ(s.inside.size(), 39u * 3u);
+  EXPECT_EQ(s.outside[0].size(), 39u);
+  EXPECT_EQ(s.outside[1].size(), 39u);
+  EXPECT_EQ(s.glare, 39);  // the middle samples only
+  EXPECT_NEAR(s.outside[0].front(), 110.f, 1e-3);  // chroma of the tissue beside the left line
+  EXPECT_FALSE(mostlyGlare(img, c, p));
+  // A white reflection filling the strip: glare.
+  cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(245, 250, 252), cv::FILLED);
+  s = acrossContour(img, c);
+  EXPECT_EQ(s.glare, 39 * 3);
+  EXPECT_TRUE(mostlyGlare(img, c, p));
+  // Bright but coloured (pale pink tissue, chroma >= 30) is not glare; nor is white on half the
+  // samples or fewer.
+  cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(200, 205, 245), cv::FILLED);
+  EXPECT_EQ(acrossContour(img, c).glare, 0);
+  EXPECT_FALSE(mostlyGlare(img, c, p));
+  cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
+  cv::rectangle(img, cv::Point(100, 160), cv::Point(140, 239), cv::Scalar(250, 250, 250), cv::FILLED);  // toward the entry
+  s = acrossContour(img, c);
+  EXPECT_GT(s.glare, 0);
+  EXPECT_LE(s.glare, static_cast<int>(0.5 * s.inside.size()));
+  EXPECT_FALSE(mostlyGlare(img, c, p));
+  ContourLinesParams strict = p;
+  strict.max_glare_fraction = 0.3;
+  EXPECT_TRUE(mostlyGlare(img, c, strict));
+  // Samples off the image are left out (a strip reaching past the border).
+  ApparentContour off = c;
+  off.tip_px = Eigen::Vector2d(120.0, -100.0);
+  EXPECT_LT(acrossContour(img, off).inside.size(), 39u * 3u);
+}
