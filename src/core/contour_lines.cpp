@@ -225,44 +225,63 @@ std::optional<RobustLine> fitLineLMedS(std::vector<Eigen::Vector2d> const& pts, 
 
 namespace {
 
-// The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
-// min_edge_contrast.
-std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
-                                               ContourLinesParams const& p) {
-  Eigen::Vector2d const n = line.head<2>();   // toward the shaft
-  Eigen::Vector2d const dir(-n.y(), n.x());
-  Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
-  double const h = p.refine_halfwidth_px, ds = p.profile_step_px;
-  int const ns = static_cast<int>(std::lround(2.0 * h / ds)) + 1;
-  std::vector<float> prof(static_cast<std::size_t>(ns)), val(static_cast<std::size_t>(ns));
-  std::vector<Eigen::Vector2d> pts;
-  bool const need_value = p.brightness_fallback_contrast > 0.0;
-  double const xmax = bgr.cols - 1, ymax = bgr.rows - 1;
-  for (double t = t0; t <= t1; t += p.refine_step_px) {
+// Sub-pixel edge points on profiles across a line, one at a time (the buffers of a profile are
+// reused).
+class EdgeProfiler {
+ public:
+  EdgeProfiler(cv::Mat const& bgr, ContourLinesParams const& p)
+      : bgr_(bgr), p_(p), h_(p.refine_halfwidth_px), ds_(p.profile_step_px),
+        ns_(static_cast<int>(std::lround(2.0 * h_ / ds_)) + 1), prof_(static_cast<std::size_t>(ns_)),
+        val_(static_cast<std::size_t>(ns_)), need_value_(p.brightness_fallback_contrast > 0.0) {}
+
+  // The edge on the profile across `line` at t along its direction (-b, a); nullopt when the
+  // profile leaves the image or has no edge steeper than min_edge_contrast.
+  std::optional<Eigen::Vector2d> at(ImageLine const& line, double t) {
+    Eigen::Vector2d const n = line.head<2>();   // toward the shaft
+    Eigen::Vector2d const dir(-n.y(), n.x());
+    Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
+    double const xmax = bgr_.cols - 1, ymax = bgr_.rows - 1;
     Eigen::Vector2d const base = o + t * dir;
     // The profile lies inside the image if both its ends do (chromaAt's bounds).
-    Eigen::Vector2d const a = base - h * n, b = base + (-h + (ns - 1) * ds) * n;
+    Eigen::Vector2d const a = base - h_ * n, b = base + (-h_ + (ns_ - 1) * ds_) * n;
     if (!(std::min(a.x(), b.x()) >= 0.0 && std::min(a.y(), b.y()) >= 0.0 && std::max(a.x(), b.x()) < xmax &&
           std::max(a.y(), b.y()) < ymax))
-      continue;
-    if (need_value) {
-      for (int i = 0; i < ns; ++i) {
-        Eigen::Vector2d const q = base + (-h + i * ds) * n;
-        chromaAt(bgr, q.x(), q.y(), &prof[i], &val[i]);
+      return std::nullopt;
+    if (need_value_) {
+      for (int i = 0; i < ns_; ++i) {
+        Eigen::Vector2d const q = base + (-h_ + i * ds_) * n;
+        chromaAt(bgr_, q.x(), q.y(), &prof_[i], &val_[i]);
       }
     } else {
-      sampleChroma(bgr, a, ds * n, ns, prof.data());
+      sampleChroma(bgr_, a, ds_ * n, ns_, prof_.data());
     }
     // The edge is located in chroma, where the shaded rim of a grey shaft does not bias it (metal
     // mirrors tissue colours, so it is the steepest descent, not the first seen from inside --
     // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
     // little chroma contrast: then its drop in brightness is used.
-    auto at = steepestDescent(prof, ds, p.min_edge_contrast * 2.0 * ds);
-    if (!at && need_value) at = steepestDescent(val, ds, p.brightness_fallback_contrast * 2.0 * ds);
-    if (!at) continue;
-    double const s = -h + *at * ds;
-    pts.push_back(base + s * n);
+    auto at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_);
+    if (!at && need_value_) at = steepestDescent(val_, ds_, p_.brightness_fallback_contrast * 2.0 * ds_);
+    if (!at) return std::nullopt;
+    return Eigen::Vector2d(base + (-h_ + *at * ds_) * n);
   }
+
+ private:
+  cv::Mat const& bgr_;
+  ContourLinesParams const& p_;
+  double const h_, ds_;
+  int const ns_;
+  std::vector<float> prof_, val_;
+  bool const need_value_;
+};
+
+// The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
+// min_edge_contrast, every refine_step_px from t0 to t1.
+std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                               ContourLinesParams const& p) {
+  EdgeProfiler profiler(bgr, p);
+  std::vector<Eigen::Vector2d> pts;
+  for (double t = t0; t <= t1; t += p.refine_step_px)
+    if (auto const q = profiler.at(line, t)) pts.push_back(*q);
   return pts;
 }
 
@@ -275,9 +294,11 @@ ContourLinesParams widePass(ContourLinesParams const& p) {
   return wide;
 }
 
-std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
-                                              ContourLinesParams const& p) {
-  std::vector<Eigen::Vector2d> const pts = subpixelEdgePoints(bgr, line, t0, t1, p);
+namespace {
+
+// The robust line through sub-pixel edge points (Tukey biweight, scale from the MAD, three
+// passes), oriented like `line` (shaft on the positive side), with its covariance.
+std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pts, ImageLine const& line, ContourLinesParams const& p) {
   Eigen::Vector2d const n = line.head<2>();
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
   // Robust LS: Tukey biweight, scale from the MAD, three passes.
@@ -299,6 +320,47 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
   }
   if (l.head<2>().dot(n) < 0.0) l = -l;  // keep the shaft on the positive side
   return summarizeLine(l, pts, w, p.min_edge_points, p.line_sigma_floor_px);
+}
+
+}  // namespace
+
+std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& p) {
+  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p), line, p);
+}
+
+std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
+                                              double t_lo, double t_hi, ContourLinesParams const& p) {
+  if (p.extend_max_misses <= 0 || refined.inliers.empty()) return std::nullopt;
+  ImageLine l = refined.line;
+  std::vector<Eigen::Vector2d> pts = refined.inliers;
+  // An edge point continues the line within 3 of its residuals (at least gate_min px).
+  double const gate = std::max(3.0 * refined.residual_px, p.extend_gate_px);
+  std::size_t const before = pts.size();
+  EdgeProfiler profiler(bgr, p);
+  for (int dir : {1, -1}) {
+    double t = dir > 0 ? t1 : t0;
+    int misses = 0, added = 0;
+    while (true) {
+      t += dir * p.refine_step_px;
+      if (dir > 0 ? t > t_hi : t < t_lo) break;
+      auto const q = profiler.at(l, t);
+      if (q && std::abs(l.head<2>().dot(*q) + l.z()) <= gate) {
+        pts.push_back(*q);
+        misses = 0;
+        // Follow the line as it gets longer (its direction improves with the baseline).
+        if (++added % 16 == 0)
+          if (auto const f = robustEdgeLine(pts, l, p)) l = f->line;
+      } else if (++misses >= p.extend_max_misses) {
+        break;
+      }
+    }
+  }
+  if (pts.size() == before) return std::nullopt;
+  auto const out = robustEdgeLine(pts, refined.line, p);
+  // The extension must continue the same edge: not a noisier one (jaws, a touching blob).
+  if (!out || out->residual_px > 1.25 * refined.residual_px + 0.05) return std::nullopt;
+  return out;
 }
 
 namespace {
@@ -469,9 +531,19 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     wide.max_residual_px = 1e9;
     auto const r0 = refineLineSubpixel(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide);
     if (!r0) return reject(ContourRejection::kWeakEdges);
-    auto const r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p);
+    auto r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p);
     if (!r) return reject(ContourRejection::kWeakEdges);
     if (r->residual_px > p.max_residual_px) return reject(ContourRejection::kResidual);
+    // The region's side can stop short of the shaft's edge (a highlight, noise, JPEG, a
+    // touching blob): the edge is followed along the refined line, back to the entry and on
+    // until it ends (the image bounds it), and the line refitted over it all: a longer baseline,
+    // a better direction (hard scene: line p95 0.473 -> 0.442 px, direction 1.03 -> 0.91 deg).
+    {
+      Eigen::Vector2d const dr(-r->line.y(), r->line.x());
+      double const te = dr.dot(footOnLine(r->line, entry)), tf = dr.dot(footOnLine(r->line, far));
+      double const inf = std::numeric_limits<double>::infinity();
+      if (auto const x = extendLineSubpixel(bgr, *r, t0 + 2.0, t1 - 2.0, tf > te ? te : -inf, tf > te ? inf : te, p)) r = x;
+    }
     ref[s] = *r;
     fit.edge_points += r->points;
   }

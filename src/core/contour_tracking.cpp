@@ -111,8 +111,11 @@ TrackedShaft startTrack(ApparentContour const& contour, std::array<std::vector<E
   s.edges = edges;
   Eigen::Vector2d const dir = axisDirection(contour);
   edgeExtent(edges, contour.entry_px, dir, &s.edge_start, &s.edge_end);
-  s.detected_edge_end = s.edge_end;
   s.tip_distance = std::max(0.0, dir.dot(contour.tip_px - contour.entry_px));
+  // (the detection follows each edge to its end, which can lie a fraction of a px beyond the
+  // tip the region gave: the tracked extent is cut at the tip)
+  s.edge_end = std::min(s.edge_end, s.tip_distance);
+  s.detected_edge_end = s.edge_end;
   double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(contour, contour.entry_px + s.tip_distance * dir));
   s.chroma_tip = tipAlongAxis(bgr, contour, contour.entry_px, dir, s.edge_start, s.edge_end, s.tip_distance, reach)
                      .value_or(s.tip_distance);

@@ -100,6 +100,8 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/max_angle_deg", d(S.contours.max_angle_deg)},
       {"segmentation/min_length_px", d(S.contours.min_length_px)},
       {"segmentation/max_residual_px", d(S.contours.max_residual_px)},
+      {"segmentation/extend_max_misses", i(S.contours.extend_max_misses)},
+      {"segmentation/extend_gate_px", d(S.contours.extend_gate_px)},
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
       {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
       {"segmentation/min_fill", d(S.contours.min_fill)},

@@ -206,3 +206,77 @@ TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
   off.tip_px = Eigen::Vector2d(120.0, -100.0);
   EXPECT_LT(acrossContour(img, off).inside.size(), 39u * 3u);
 }
+
+// Grey shaft right of the exact line x = 40.3 + 0.1 y on red tissue (area coverage), over rows
+// y0..y1 only (tissue elsewhere); `offset` shifts the edge by that many px for rows >= y_kink.
+namespace {
+cv::Mat stepImage(int y0, int y1, double offset = 0.0, int y_kink = 1000) {
+  cv::Mat img(200, 100, CV_8UC3, cv::Scalar(60, 70, 170));
+  for (int y = y0; y <= y1; ++y)
+    for (int x = 0; x < 100; ++x) {
+      double const s = x - (40.3 + 0.1 * y) - (y >= y_kink ? offset : 0.0);
+      double const cov = std::clamp(0.5 + s, 0.0, 1.0);
+      cv::Vec3d const c = cv::Vec3d(60, 70, 170) * (1 - cov) + cv::Vec3d(130, 130, 134) * cov;
+      img.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]), cv::saturate_cast<uchar>(c[2]));
+    }
+  return img;
+}
+}  // namespace
+
+TEST(ContourLines, RefinedLineIsFollowedAlongItsEdge) {
+  ContourLinesParams const p;
+  ImageLine const edge = *normalizeLine(Eigen::Vector3d(1.0, -0.1, -40.3));
+  Eigen::Vector2d const d(-edge.y(), edge.x());  // t grows with y
+  auto tAt = [&](double y) { return d.dot(Eigen::Vector2d(40.3 + 0.1 * y, y)); };
+  // The edge runs over rows 5..194; the region side only gave rows 60..90. Followed, the line's
+  // points cover the whole edge (each end within a few profiles).
+  cv::Mat const img = stepImage(5, 194);
+  auto const r = refineLineSubpixel(img, edge, tAt(60), tAt(90), p);
+  ASSERT_TRUE(r);
+  auto const x = extendLineSubpixel(img, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(x);
+  double lo = 1e9, hi = -1e9;
+  for (auto const& q : x->inliers) {
+    lo = std::min(lo, q.y());
+    hi = std::max(hi, q.y());
+  }
+  EXPECT_LT(lo, 12.0);
+  EXPECT_GT(hi, 187.0);
+  EXPECT_GT(x->points, 3 * r->points);
+  for (double y : {5.0, 194.0}) EXPECT_NEAR(x->line.dot(Eigen::Vector3d(40.3 + 0.1 * y, y, 1.0)), 0.0, 0.03) << "y " << y;
+  EXPECT_GT(x->line.head<2>().dot(r->line.head<2>()), 0.99);  // orientation kept
+  // The limits are kept: only toward larger t, up to row 120.
+  auto const up = extendLineSubpixel(img, *r, tAt(60), tAt(90), tAt(60), tAt(120), p);
+  ASSERT_TRUE(up);
+  for (auto const& q : up->inliers) {
+    EXPECT_GE(q.y(), 58.0);
+    EXPECT_LE(q.y(), 121.0);
+  }
+  // A gap of 30 rows (more than extend_max_misses profiles) ends the edge: the part beyond
+  // is not followed; a gap of 12 rows is crossed.
+  cv::Mat gap = stepImage(5, 194);
+  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 129), cv::Scalar(60, 70, 170), cv::FILLED);
+  auto const g = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(g);
+  for (auto const& q : g->inliers) EXPECT_LT(q.y(), 101.0);
+  gap = stepImage(5, 194);
+  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 111), cv::Scalar(60, 70, 170), cv::FILLED);
+  auto const g2 = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(g2);
+  double hi2 = 0.0;
+  for (auto const& q : g2->inliers) hi2 = std::max(hi2, q.y());
+  EXPECT_GT(hi2, 187.0);
+  // An edge that steps aside by 2 px (another edge in line: jaws, a touching blob) is not
+  // followed past the step, and the line stays the first edge's.
+  cv::Mat const kink = stepImage(5, 194, 2.0, 110);
+  auto const k = extendLineSubpixel(kink, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(k);
+  for (auto const& q : k->inliers) EXPECT_LT(q.y(), 112.0);
+  for (double y : {5.0, 105.0}) EXPECT_NEAR(k->line.dot(Eigen::Vector3d(40.3 + 0.1 * y, y, 1.0)), 0.0, 0.03) << "y " << y;
+  // Not followed at all (0 misses allowed) or no edge beyond: nothing to add.
+  ContourLinesParams off = p;
+  off.extend_max_misses = 0;
+  EXPECT_FALSE(extendLineSubpixel(img, *r, tAt(60), tAt(90), -1e9, 1e9, off));
+  cv::Mat const only = stepImage(60, 90);
+  EXPECT_FALSE(extendLineSubpixel(only, *r, tAt(60), tAt(90), -1e9, 1e9, p));
+}

@@ -36,6 +36,10 @@ struct ContourLinesParams {
                                               ///< takes a brightness drop this steep (0: never; 8 found
                                               ///< 1 more in-vivo shaft but cost 0.25 px of line accuracy)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
+  int extend_max_misses = 10;     ///< a refined line is followed beyond its region side until this many
+                                  ///< profiles in a row give no edge on it (10: 20 px of occlusion are
+                                  ///< crossed; 3 and a 0.5 px gate: hard-scene line p95 0.463 px; 0: not followed)
+  double extend_gate_px = 0.75;   ///< ... "on it": within max(3 residuals, this)
   double line_sigma_floor_px = 0.25;  ///< px: systematic error at each end of a line, added to the covariance
                                       ///< the residuals give. They miss the errors common to the edge points
                                       ///< (compression, shading): on the rendered scenes the axes' distances to
@@ -141,6 +145,14 @@ double scoreSides(SideFit const& sides, cv::Mat const& bgr_full, ContourLinesPar
 /// The second half: sub-pixel lines, order, tip and the length/width checks.
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full,
                          int scale, ContourLinesParams const& params);
+
+/// A refined line (over [t0, t1] along its direction (-b, a)) followed beyond that extent, within
+/// [t_lo, t_hi]: one narrow profile every refine_step_px, kept while its edge lies on the line
+/// (within max(3 residuals, extend_gate_px)), until extend_max_misses profiles in a row miss; the
+/// line refitted over all its points, refitted every 16 new ones on the way. nullopt: nothing
+/// added, or the extension made the residual worse (another edge).
+std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
+                                              double t_lo, double t_hi, ContourLinesParams const& params);
 
 /// Lens distortion: the contour lines refitted (least squares, with covariance) to the edge
 /// points mapped by `rectify` (distorted pixel -> pixel of the rectified camera), the entry and
