@@ -407,6 +407,74 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
   return f;
 }
 
+// The side of a region whose boundary, from the entry, is not a straight line (a grey blob
+// merged with the shaft near the entry: gauze): the straight stretch of `chain` (the boundary
+// from the entry to the point farthest from the seed) that is near-parallel to the other side's
+// line `other` (the contours of a cylinder meet at most max_angle_deg apart) and has the most
+// points within 1 px; its longest run along the chain (gaps of max_gap_points allowed).
+std::optional<FollowedSide> parallelSide(std::vector<Eigen::Vector2d> const& chain, FollowedSide const& other_side,
+                                         ContourLinesParams const& p, std::uint64_t seed) {
+  Eigen::Vector3d const& other = other_side.line;
+  int const n = static_cast<int>(chain.size());
+  if (n < p.min_side_points) return std::nullopt;
+  double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
+  Eigen::Vector2d const od(-other.y(), other.x());
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  Eigen::Vector3d best = Eigen::Vector3d::Zero();
+  int best_count = 0;
+  for (int s = 0; s < 4 * p.lmeds_samples; ++s) {
+    int const i = pick(rng), j = pick(rng);
+    Eigen::Vector2d const d = chain[j] - chain[i];
+    double const len = d.norm();
+    if (len < 4.0 || std::abs(od.dot(d / len)) < cos_max) continue;
+    Eigen::Vector2d const nrm(-d.y() / len, d.x() / len);
+    double const c = -nrm.dot(chain[i]);
+    int count = 0;
+    for (auto const& q : chain) count += std::abs(nrm.dot(q) + c) <= 1.0;
+    if (count > best_count) {
+      best_count = count;
+      best = Eigen::Vector3d(nrm.x(), nrm.y(), c);
+    }
+  }
+  if (best_count < p.min_side_points) return std::nullopt;
+  // The longest run of points on the line.
+  int run_start = -1, run_end = -1, cur_start = -1, last = -1, best_len = 0;
+  for (int i = 0; i < n; ++i) {
+    if (std::abs(best.head<2>().dot(chain[i]) + best.z()) > 1.0) continue;
+    if (cur_start < 0 || i - last > p.max_gap_points + 1) cur_start = i;
+    last = i;
+    if (i - cur_start + 1 > best_len) {
+      best_len = i - cur_start + 1;
+      run_start = cur_start;
+      run_end = i;
+    }
+  }
+  FollowedSide f;
+  for (int i = run_start; i >= 0 && i <= run_end; ++i)
+    if (std::abs(best.head<2>().dot(chain[i]) + best.z()) <= 1.0) f.points.push_back(chain[i]);
+  if (static_cast<int>(f.points.size()) < p.min_side_points) return std::nullopt;
+  // A side of the same shaft: at least half as long as the other, and beside it for most of its
+  // length (not a short straight stretch of the blob's outline).
+  auto extent = [&](std::vector<Eigen::Vector2d> const& v) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (auto const& q : v) {
+      lo = std::min(lo, od.dot(q));
+      hi = std::max(hi, od.dot(q));
+    }
+    return std::make_pair(lo, hi);
+  };
+  auto const [a0, a1] = extent(other_side.points);
+  auto const [b0, b1] = extent(f.points);
+  double const overlap = std::min(a1, b1) - std::max(a0, b0);
+  if (b1 - b0 < p.min_parallel_side_ratio * (a1 - a0) || overlap < p.min_parallel_side_ratio * (b1 - b0)) return std::nullopt;
+  auto const ls = fitLineLS(f.points);
+  if (!ls) return std::nullopt;
+  f.line = *ls;
+  f.traversed = run_end + 1;
+  return f;
+}
+
 }  // namespace
 
 void setFarEnd(SideFit& fit) {
@@ -469,24 +537,57 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
       chain[dirn].emplace_back(B[i].x, B[i].y);
     }
   }
-  std::optional<FollowedSide> side[2];
-  for (int s = 0; s < 2; ++s) {
-    side[s] = followSide(chain[s], p, p.seed + s);
-    if (!side[s])
-      return reject(static_cast<int>(chain[s].size()) < p.min_side_points ? ContourRejection::kTooFewPoints
-                                                                          : ContourRejection::kNotStraight);
-  }
+  // Each side followed from the entry ([Doignon07]'s two classes). A region merged with a grey
+  // blob near the entry (gauze) has one side that is not a straight line from there: that side
+  // is then the straight stretch of its chain, up to the point farthest from the seed, that
+  // runs parallel beside the other side (parallelSide()); the pair is marked `parallel`.
   double const off = 0.5 * (scale - 1);
   auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
-  for (int s = 0; s < 2; ++s) {
-    for (auto const& q : side[s]->points) fit.points[s].push_back(toFull(q));
-    auto const l = fitLineLS(fit.points[s]);
-    if (!l) return reject(ContourRejection::kNotStraight);
-    fit.lines[s] = *l;
-    fit.inliers += static_cast<int>(side[s]->points.size());
+  double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
+  // The pair's lines (full resolution) if parallel enough; else the reason.
+  auto pairUp = [&](FollowedSide const& a, FollowedSide const& b) -> ContourRejection {
+    std::array<std::vector<Eigen::Vector2d>, 2> pts;
+    std::array<Eigen::Vector3d, 2> lines;
+    FollowedSide const* sides[2] = {&a, &b};
+    for (int s = 0; s < 2; ++s) {
+      for (auto const& q : sides[s]->points) pts[s].push_back(toFull(q));
+      auto const l = fitLineLS(pts[s]);
+      if (!l) return ContourRejection::kNotStraight;
+      lines[s] = *l;
+    }
+    if (std::abs(lines[0].head<2>().dot(lines[1].head<2>())) < cos_max) return ContourRejection::kNotParallel;
+    for (int s = 0; s < 2; ++s) {
+      fit.points[s] = std::move(pts[s]);
+      fit.lines[s] = lines[s];
+      fit.inliers += static_cast<int>(sides[s]->points.size());
+    }
+    return ContourRejection::kNone;
+  };
+  std::optional<FollowedSide> fwd[2];
+  for (int s = 0; s < 2; ++s) fwd[s] = followSide(chain[s], p, p.seed + s);
+  ContourRejection why = ContourRejection::kNone;
+  for (int s = 0; s < 2 && why == ContourRejection::kNone; ++s)
+    if (!fwd[s])
+      why = static_cast<int>(chain[s].size()) < p.min_side_points ? ContourRejection::kTooFewPoints : ContourRejection::kNotStraight;
+  if (why == ContourRejection::kNone) why = pairUp(*fwd[0], *fwd[1]);
+  if (why != ContourRejection::kNone && p.min_parallel_side_ratio > 0.0) {
+    Eigen::Vector2d const sp(region.seed.x, region.seed.y);
+    for (int s = 0; s < 2; ++s) {
+      if (!fwd[1 - s]) continue;
+      auto const far = std::max_element(chain[s].begin(), chain[s].end(), [&](Eigen::Vector2d const& a, Eigen::Vector2d const& b) {
+        return (a - sp).squaredNorm() < (b - sp).squaredNorm();
+      });
+      if (far == chain[s].end()) continue;
+      std::vector<Eigen::Vector2d> const head(chain[s].begin(), far + 1);
+      auto const side = parallelSide(head, *fwd[1 - s], p, p.seed + 2 + s);
+      if (side && pairUp(s == 0 ? *side : *fwd[0], s == 0 ? *fwd[1] : *side) == ContourRejection::kNone) {
+        fit.parallel = true;
+        why = ContourRejection::kNone;
+        break;
+      }
+    }
   }
-  if (std::abs(fit.lines[0].head<2>().dot(fit.lines[1].head<2>())) < std::cos(p.max_angle_deg * M_PI / 180.0))
-    return reject(ContourRejection::kNotParallel);
+  if (why != ContourRejection::kNone) return reject(why);
   fit.entry = toFull(Eigen::Vector2d(region.seed.x, region.seed.y));
   setFarEnd(fit);
   // Orient each line with the shaft on its positive side: the mean of both sides' points.

@@ -269,6 +269,28 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // Grows at the given levels, scores each region's side pair, refines the best in full.
     // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
     std::vector<int> tried;  // levels grown so far for this seed
+    // Candidates with a side found only as the stretch parallel to the other (fitSides(): a
+    // shaft merged with a blob near its entry) come last, after the strip search.
+    std::vector<Candidate> deferred;
+    // Refines the candidates, best score first, until one is accepted.
+    auto refineCandidates = [&](std::vector<Candidate>& cands) {
+      std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
+      for (auto& cd : cands) {
+        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
+        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
+          f.contour.reset();
+          f.rejection = ContourRejection::kGlare;
+        }
+        if (f.contour) {
+          best = std::move(cd.region);
+          best_fit = std::move(f);
+          best_level = cd.level;
+          best_score = cd.score;
+          return;
+        }
+        why = f.rejection;
+      }
+    };
     auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
       std::vector<Candidate> cands;
       for (int li : levels) {
@@ -291,25 +313,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
           continue;
         }
-        cands.push_back({std::move(*r), std::move(sf), score, li});
-        if (tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
+        bool const parallel = sf.parallel;
+        (parallel ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li});
+        if (!parallel && tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
       }
-      std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
-      for (auto& cd : cands) {
-        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
-        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
-          f.contour.reset();
-          f.rejection = ContourRejection::kGlare;
-        }
-        if (f.contour) {
-          best = std::move(cd.region);
-          best_fit = std::move(f);
-          best_level = cd.level;
-          best_score = cd.score;
-          return;
-        }
-        why = f.rejection;
-      }
+      refineCandidates(cands);
     };
     std::vector<int> all(T.size());
     std::iota(all.begin(), all.end(), 0);
@@ -335,6 +343,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // in the feature's gradient (strip_search.h), once per seed.
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(nullptr);
+    if (!best && !deferred.empty()) refineCandidates(deferred);
     if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
     // border run): the region is claimed, not reported. Its memory stays that of a shaft, so that

@@ -105,6 +105,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
       {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
       {"segmentation/min_fill", d(S.contours.min_fill)},
+      {"segmentation/min_parallel_side_ratio", d(S.contours.min_parallel_side_ratio)},
       {"segmentation/min_elongation", d(S.contours.min_elongation)},
       {"segmentation/max_widening", d(S.contours.max_widening)},
       {"segmentation/max_glare_fraction", d(S.contours.max_glare_fraction)},

@@ -280,3 +280,38 @@ TEST(ContourLines, RefinedLineIsFollowedAlongItsEdge) {
   cv::Mat const only = stepImage(60, 90);
   EXPECT_FALSE(extendLineSubpixel(only, *r, tAt(60), tAt(90), -1e9, 1e9, p));
 }
+
+TEST(ContourLines, AShaftMergedWithGauzeAtItsEntryIsFoundBesideItsStraightSide) {
+  // The rendered scene with the gauze blob, frame 60: the bottom shaft's region merges with the
+  // gauze near its entry, so that one side is not a straight line from the entry; that side is
+  // the stretch of the boundary parallel to the other (SideFit::parallel).
+  SyntheticSceneOptions so;
+  SyntheticScene scene(defaultInstruments(), so);
+  RenderOptions ro;
+  ro.membranes = true;
+  ro.gauze = true;
+  SceneRenderer renderer(so.width, so.height, ro);
+  auto const views = scene.frame(60);
+  cv::Mat const img = renderer.render(views, 60);
+  ApparentContour const& truth = views[0].truth;  // the bottom shaft, entering at the bottom border
+  ASSERT_GT(truth.entry_px.y(), 470.0);
+  auto found = [&](SegmentationParams const& sp) {
+    InstrumentSegmenter seg(sp);
+    auto const res = seg.process(img);
+    for (auto const& c : res.contours) {
+      double e = 0.0;
+      for (int k = 0; k < 2; ++k)
+        for (Eigen::Vector2d const& q : {truth.entry_px, truth.tip_px}) {
+          Eigen::Vector2d const f = footOnLine(truth.lines[k], q);
+          e = std::max(e, std::abs(c.lines[k].dot(f.homogeneous())));
+        }
+      if (e < 1.0) return true;  // both lines within 1 px over the whole shaft
+    }
+    return false;
+  };
+  SegmentationParams sp;
+  sp.strip.enabled = false;  // the region alone
+  EXPECT_TRUE(found(sp));
+  sp.contours.min_parallel_side_ratio = 0.0;  // no parallel side: the merged region is refused
+  EXPECT_FALSE(found(sp));
+}
