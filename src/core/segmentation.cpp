@@ -222,6 +222,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     ContourFit best_fit;
     int best_level = -1;
     double best_score = 0.0;
+    bool best_parallel = false;
     std::optional<StripCandidate> best_strip;
     ContourRejection why = ContourRejection::kTooFewPoints;
     // The strip search (strip_search.h): the sides searched from the seed in the gradient.
@@ -287,6 +288,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           best_fit = std::move(f);
           best_level = cd.level;
           best_score = cd.score;
+          best_parallel = cd.sides.parallel;
           return;
         }
         why = f.rejection;
@@ -314,9 +316,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
           continue;
         }
-        bool const parallel = sf.parallel;
-        (parallel ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li});
-        if (!parallel && tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
+        // (not deferred for a shaft that was found so in the last frame: its level is tried first)
+        bool const defer = sf.parallel && !(tracked && mem->parallel);
+        (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li});
+        if (!defer && tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
       }
       refineCandidates(cands);
     };
@@ -345,7 +348,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
-    if (best) memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
+    if (best) {
+      memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
+      memory_now.back().parallel = best_parallel;
+    }
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
     // border run): the region is claimed, not reported. Its memory stays that of a shaft, so that
     // next frame this seed is searched again at once (the other seed may be gone by then).

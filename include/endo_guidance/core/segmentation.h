@@ -90,6 +90,7 @@ class InstrumentSegmenter {
     int width = 0;          // border points of its run
     std::optional<StripCandidate> strip;  // the strip it was found as (strip search), if so
     bool grown = true;      // a region was kept (false: every level leaked)
+    bool parallel = false;  // accepted with a side parallel to the other (SideFit::parallel: merged with a blob)
   };
   Memory const* remembered(Seed const& seed) const;
   bool stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const;
