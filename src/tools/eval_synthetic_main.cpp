@@ -189,6 +189,18 @@ int main(int argc, char** argv) {
   bool check = false, overlay = false, verbose = false;
   std::vector<std::string> only;
   std::string params_path;
+  // Regression bounds per scene (SCENE=VALUE, repeatable): exit 1 when one is violated.
+  struct Bound {
+    std::string scene;
+    double value;
+  };
+  std::vector<Bound> min_found, max_false, max_line_p95, max_trocar;
+  auto bound = [&](std::string const& a, std::vector<Bound>& v) {
+    auto const eq = a.find('=');
+    if (eq == std::string::npos) return false;
+    v.push_back({a.substr(0, eq), std::atof(a.c_str() + eq + 1)});
+    return true;
+  };
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
     if (a == "--frames" && i + 1 < argc) frames = std::atoi(argv[++i]);
@@ -197,10 +209,16 @@ int main(int argc, char** argv) {
     else if (a == "--verbose") verbose = true;
     else if (a == "--scene" && i + 1 < argc) only.push_back(argv[++i]);
     else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
+    else if (a == "--min-found" && i + 1 < argc && bound(argv[i + 1], min_found)) ++i;
+    else if (a == "--max-false" && i + 1 < argc && bound(argv[i + 1], max_false)) ++i;
+    else if (a == "--max-line-p95" && i + 1 < argc && bound(argv[i + 1], max_line_p95)) ++i;
+    else if (a == "--max-trocar" && i + 1 < argc && bound(argv[i + 1], max_trocar)) ++i;
     else {
       std::fprintf(stderr,
                    "usage: endo_guidance_eval_synthetic [--frames N] [--scene clean|hard|black_circular]... [--overlay] [--check]\n"
-                   "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n");
+                   "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n"
+                   "       [--min-found SCENE=PCT] [--max-false SCENE=PER_FRAME] [--max-line-p95 SCENE=PX] [--max-trocar SCENE=MM]\n"
+                   "       (regression bounds, repeatable; exit 1 if one is violated)\n");
       return 2;
     }
   }
@@ -223,7 +241,7 @@ int main(int argc, char** argv) {
   bc.black_shafts = true;
   bc.circular_fov = true;
   std::vector<Scene> scenes{{"clean", clean, 0.0}, {"hard", hard, 0.002}, {"black_circular", bc, 0.0}};
-  bool pass = true;
+  bool pass = true, bounds_ok = true;
   // false/f: segmentation contours that match no shaft (the stricter count); reported/f: the
   // instruments the pipeline reports (shafts attached to a trocar once one is known) that match
   // none; late fp: the same after frame 100.
@@ -241,6 +259,19 @@ int main(int argc, char** argv) {
     if (verbose)
       std::printf("  %s: %d of %d visible shafts found, %d of %d with a line cut off; %d false in %d frames\n", s.name.c_str(), r.found,
                   r.visible, r.cut_found, r.cut, r.false_shafts, r.frames);
+    auto violated = [&](std::vector<Bound> const& bs, double v, bool upper, char const* what) {
+      bool bad = false;
+      for (auto const& b : bs)
+        if (b.scene == s.name && (upper ? v > b.value : v < b.value)) {
+          std::printf("  REGRESSION %s: %s %.4f, bound %.4f\n", s.name.c_str(), what, v, b.value);
+          bad = true;
+        }
+      return bad;
+    };
+    bool const regressed = violated(min_found, found, false, "found %") | violated(max_false, fpf, true, "false per frame") |
+                           violated(max_line_p95, percentile(r.line_px, 0.95), true, "line p95 px") |
+                           violated(max_trocar, tro, true, "worst trocar mm");
+    bounds_ok &= !regressed;
     if (check) {
       bool const is_clean = s.name == "clean";
       double const min_found = s.name == "black_circular" ? 97.0 : 99.0;
@@ -249,5 +280,5 @@ int main(int argc, char** argv) {
     }
   }
   if (check) std::printf("targets: %s\n", pass ? "MET" : "NOT MET");
-  return check && !pass ? 1 : 0;
+  return (check && !pass) || !bounds_ok ? 1 : 0;
 }
