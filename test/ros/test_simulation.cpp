@@ -63,6 +63,16 @@ class Simulation : public ::testing::Test {
       cmd_.publish(c);
     }
   }
+  /// Waits (up to 3 s) until the joints stop moving: the commands of a previous test keep the arm
+  /// going until its watchdog stops it.
+  void waitForRest() {
+    for (int i = 0; i < 12; ++i) {
+      auto const a = joints_.get().position;
+      ros::WallDuration(0.25).sleep();
+      if (joints_.get().position == a) return;
+    }
+    ADD_FAILURE() << "the arm did not come to rest";
+  }
   ros::NodeHandle nh_;
   Joints joints_;
   ros::Subscriber joints_sub_;
@@ -145,6 +155,7 @@ TEST_F(Simulation, LimitsHoldUnderSaturatingCommands) {
 }
 
 TEST_F(Simulation, CommandInTheWrongFrameIsIgnored) {
+  waitForRest();  // (LimitsHoldUnderSaturatingCommands may run just before)
   double const before = joints_.get().position.at(4);  // arm_1? no: arm_0 only listens on arm_0/command
   auto const q0 = joints_.get().position.at(1);
   command(0.0, 0.3, 0.0, 0.0, 0.6, "camera_frame");
