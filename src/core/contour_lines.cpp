@@ -840,9 +840,12 @@ AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& c) {
   return s;
 }
 
-bool mostlyGlare(cv::Mat const& bgr, ApparentContour const& contour, ContourLinesParams const& p) {
-  AcrossSamples const s = acrossContour(bgr, contour);
+bool mostlyGlare(AcrossSamples const& s, ContourLinesParams const& p) {
   return !s.inside.empty() && s.glare > p.max_glare_fraction * static_cast<double>(s.inside.size());
+}
+
+bool mostlyGlare(cv::Mat const& bgr, ApparentContour const& contour, ContourLinesParams const& p) {
+  return mostlyGlare(acrossContour(bgr, contour), p);
 }
 
 }  // namespace endo_guidance::core

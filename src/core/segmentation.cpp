@@ -109,9 +109,9 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
   for (TrackedShaft const& t : tracked_) {
     TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
     // Lost, no longer less chromatic than the tissue beside it, or now glare: this is a detection frame.
-    if (!r.shaft || !stripContrastFullRes(bgr, r.shaft->contour, params_.strip) ||
-        mostlyGlare(bgr, r.shaft->contour, params_.contours))
-      return std::nullopt;
+    if (!r.shaft) return std::nullopt;
+    AcrossSamples const across = acrossContour(bgr, r.shaft->contour);
+    if (!stripContrastFullRes(across, params_.strip) || mostlyGlare(across, params_.contours)) return std::nullopt;
     now.push_back(std::move(*r.shaft));
   }
   // Two tracks that converged on one shaft (its double detection: shaft and shadow, or two
@@ -240,13 +240,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         f.contour.reset();
         f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
       }
-      if (f.contour && !stripContrastFullRes(bgr, *f.contour, params_.strip)) {
-        f.contour.reset();
-        f.rejection = ContourRejection::kLowContrast;
-      }
-      if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
-        f.contour.reset();
-        f.rejection = ContourRejection::kGlare;
+      if (f.contour) {
+        AcrossSamples const across = acrossContour(bgr, *f.contour);
+        if (!stripContrastFullRes(across, params_.strip)) f.rejection = ContourRejection::kLowContrast;
+        else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
+        if (f.rejection != ContourRejection::kNone) f.contour.reset();
       }
       if (!f.contour) {
         why = f.rejection;

@@ -310,7 +310,10 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
 }
 
 bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p) {
-  AcrossSamples s = acrossContour(bgr, c);
+  return stripContrastFullRes(acrossContour(bgr, c), p);
+}
+
+bool stripContrastFullRes(AcrossSamples s, StripSearchParams const& p) {
   auto& in = s.inside;
   auto& out = s.outside;
   int const specular = s.glare;  // near-white samples inside: highlights

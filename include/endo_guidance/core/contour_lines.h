@@ -90,6 +90,8 @@ AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& contour);
 /// samples > max_glare_fraction): a specular reflection on wet tissue, which the S.H feature
 /// sees as low as metal, not a shaft. A shaft's highlights are streaks along it.
 bool mostlyGlare(cv::Mat const& bgr, ApparentContour const& contour, ContourLinesParams const& params);
+/// The same from samples already taken (acrossContour()).
+bool mostlyGlare(AcrossSamples const& samples, ContourLinesParams const& params);
 
 /// A line fitted robustly to points: least median of squares over random pairs, then least squares
 /// on the inliers ([Rousseeuw87]). `line` is normalised (a^2 + b^2 = 1), orientation arbitrary.

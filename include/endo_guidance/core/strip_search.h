@@ -72,5 +72,7 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
 /// tissue and many of its samples are white. Metal mirroring the tissue is weakly contrasted but
 /// matte.
 bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, StripSearchParams const& params);
+/// The same from samples already taken (acrossContour()).
+bool stripContrastFullRes(AcrossSamples samples, StripSearchParams const& params);
 
 }  // namespace endo_guidance::core
