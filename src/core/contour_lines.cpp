@@ -374,24 +374,63 @@ struct FollowedSide {
   int traversed = 0;  ///< chain points up to the last kept one
 };
 
-std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain, ContourLinesParams const& p,
-                                       std::uint64_t seed) {
+std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain, FieldOfView const& fov,
+                                       ContourLinesParams const& p, std::uint64_t seed) {
   int const n = static_cast<int>(chain.size());
   if (n < p.min_side_points) return std::nullopt;
   int const m = std::clamp(n / 3, p.min_side_points, 80);
-  std::vector<Eigen::Vector2d> const head(chain.begin(), chain.begin() + m);
-  auto const rl = fitLineLMedS(head, p.lmeds_samples, seed);
+  bool cut = false;  // the side was cut at a bend of the head
+  auto rl = fitLineLMedS(std::vector<Eigen::Vector2d>(chain.begin(), chain.begin() + m), p.lmeds_samples, seed);
   if (!rl || rl->inliers.size() < p.min_inlier_fraction * m) return std::nullopt;
+  double tol = std::max(2.5 * rl->sigma, 1.0);
+  // The side starts at the entry. A head that spans a short shaft and its longer jaw (at another
+  // angle) holds two edges: the median picks the jaw's, or a line between the two (a wide
+  // residual scale), and the side found would not be the shaft's. The head is split at the
+  // break that best explains it by two lines (least squares, O(m) by prefix sums); the first
+  // line is the side if it is much straighter than the median's (a third of its residual scale)
+  // and heads into the view at 30 deg or more to the border (not a side's stretch along the
+  // border before it turns inward). That side is followed without refits (they would lean onto
+  // the jaw).
+  if (!fov.depth.empty() && m >= 2 * p.min_side_points) {
+    std::vector<Eigen::Matrix<double, 5, 1>> acc(static_cast<std::size_t>(m) + 1, Eigen::Matrix<double, 5, 1>::Zero());
+    for (int i = 0; i < m; ++i) {
+      Eigen::Vector2d const& q = chain[i];
+      acc[i + 1] = acc[i];
+      acc[i + 1] += (Eigen::Matrix<double, 5, 1>() << q.x(), q.y(), q.x() * q.x(), q.x() * q.y(), q.y() * q.y()).finished();
+    }
+    // Sum of squared orthogonal residuals of the LS line through chain[a..b).
+    auto sse = [&](int a, int b) {
+      Eigen::Matrix<double, 5, 1> const v = acc[b] - acc[a];
+      double const k = b - a, mx = v[0] / k, my = v[1] / k;
+      double const cxx = v[2] - k * mx * mx, cxy = v[3] - k * mx * my, cyy = v[4] - k * my * my;
+      return std::max(0.0, 0.5 * (cxx + cyy) - std::sqrt(0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy));
+    };
+    int best_b = -1;
+    double best = std::numeric_limits<double>::infinity();
+    for (int b = p.min_side_points; b + p.min_side_points <= m; ++b)
+      if (double const e = sse(0, b) + sse(b, m); e < best) {
+        best = e;
+        best_b = b;
+      }
+    if (best_b > 0 && std::sqrt(sse(0, best_b) / best_b) < 0.35 * rl->sigma) {
+      std::vector<Eigen::Vector2d> const first(chain.begin(), chain.begin() + best_b);
+      auto const l1 = fitLineLS(first);
+      if (l1 && depthAt(fov, first.back()) - depthAt(fov, first.front()) >= 0.5 * (first.back() - first.front()).norm()) {
+        rl->line = *l1;
+        tol = std::max(2.5 * std::sqrt(sse(0, best_b) / best_b), 1.0);
+        cut = true;
+      }
+    }
+  }
   FollowedSide f;
   Eigen::Vector3d l = rl->line;
-  double const tol = std::max(2.5 * rl->sigma, 1.0);
   int misses = 0, last = -1;
   for (int i = 0; i < n; ++i) {
     if (std::abs(l.head<2>().dot(chain[i]) + l.z()) <= tol) {
       f.points.push_back(chain[i]);
       misses = 0;
       last = i;
-      if (f.points.size() % 32 == 0)
+      if (!cut && f.points.size() % 32 == 0)
         if (auto const ls = fitLineLS(f.points)) l = *ls;  // follow the line as it gets longer
     } else if (++misses > p.max_gap_points && !f.points.empty()) {
       break;
@@ -564,7 +603,7 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
     return ContourRejection::kNone;
   };
   std::optional<FollowedSide> fwd[2];
-  for (int s = 0; s < 2; ++s) fwd[s] = followSide(chain[s], p, p.seed + s);
+  for (int s = 0; s < 2; ++s) fwd[s] = followSide(chain[s], fov, p, p.seed + s);
   ContourRejection why = ContourRejection::kNone;
   for (int s = 0; s < 2 && why == ContourRejection::kNone; ++s)
     if (!fwd[s])

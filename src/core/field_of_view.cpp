@@ -65,6 +65,13 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& p) {
   return fov;
 }
 
+double depthAt(FieldOfView const& fov, Eigen::Vector2d const& x) {
+  if (fov.depth.empty()) return 0.0;
+  int const c = std::clamp(static_cast<int>(std::lround(x.x())), 0, fov.depth.cols - 1);
+  int const r = std::clamp(static_cast<int>(std::lround(x.y())), 0, fov.depth.rows - 1);
+  return fov.depth.at<float>(r, c);
+}
+
 Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p) {
   if (fov.depth.cols < 7 || fov.depth.rows < 7) return Eigen::Vector2d::Zero();
   int const x = std::clamp(p.x, 3, fov.depth.cols - 4), y = std::clamp(p.y, 3, fov.depth.rows - 4);

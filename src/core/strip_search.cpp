@@ -141,10 +141,7 @@ Pair pairSides(std::vector<Ray> const& side0, std::vector<Ray> const& side1, cv:
       if (!fov.depth.empty()) {
         bool inward = true;
         for (Ray const* r : {&a, &b}) {
-          Eigen::Vector2d const e = r->start + r->length * r->dir;
-          int const x = std::clamp(static_cast<int>(std::lround(e.x())), 0, fov.depth.cols - 1);
-          int const y = std::clamp(static_cast<int>(std::lround(e.y())), 0, fov.depth.rows - 1);
-          inward = inward && fov.depth.at<float>(y, x) >= lp.min_entry_sine * r->length;
+          inward = inward && depthAt(fov, r->start + r->length * r->dir) >= lp.min_entry_sine * r->length;
         }
         if (!inward) continue;
       }

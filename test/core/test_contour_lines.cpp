@@ -315,3 +315,38 @@ TEST(ContourLines, AShaftMergedWithGauzeAtItsEntryIsFoundBesideItsStraightSide) 
   sp.contours.min_parallel_side_ratio = 0.0;  // no parallel side: the merged region is refused
   EXPECT_FALSE(found(sp));
 }
+
+TEST(ContourLines, AShortShaftsSideEndsWhereItsLongerJawBends) {
+  // A shaft seen over 20 px from the left border, then its upper jaw, open by 12 deg, 50 px long
+  // (the black_circular scene near frame 176): the upper boundary holds more points of the jaw
+  // than of the shaft. The side followed from the entry must be the shaft's (horizontal), not
+  // the jaw's nor a line between the two.
+  cv::Mat bgr(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));
+  FieldOfView const fov = detectFieldOfView(bgr);
+  cv::Mat feature(bgr.size(), CV_8U, cv::Scalar(200));
+  double const a = 12.0 * M_PI / 180.0, len = 50.0;
+  cv::Point2d const j(20.0, 100.0);  // the upper side's bend
+  std::vector<cv::Point> const body{{0, 100}, {20, 100}, {20 + static_cast<int>(len), 118}, {0, 118}};
+  std::vector<cv::Point> const jaw{j, cv::Point2d(j.x + len * std::cos(a), j.y - len * std::sin(a)),
+                                   cv::Point2d(j.x + len * std::cos(a) + 8.0 * std::sin(a), j.y - len * std::sin(a) + 8.0 * std::cos(a)),
+                                   cv::Point2d(j.x + 8.0 * std::sin(a), j.y + 8.0 * std::cos(a))};
+  cv::fillConvexPoly(feature, body, cv::Scalar(10));
+  cv::fillConvexPoly(feature, jaw, cv::Scalar(10));
+  RegionGrower grower;
+  grower.reset(feature, fov);
+  auto const region = grower.grow({3, 109}, 30);
+  ASSERT_TRUE(region);
+  SideFit const fit = fitSides(*region, fov, 1, ContourLinesParams{});
+  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
+  int upper = -1;
+  for (int s = 0; s < 2; ++s)
+    if (!fit.points[s].empty() && fit.points[s].front().y() < 109.0) upper = s;
+  ASSERT_GE(upper, 0);
+  // Horizontal through y = 100 (the boundary pixels of the row), within 3 deg and 0.5 px: at
+  // most the jaw's first few px, still within the 1 px tolerance of the shaft's line (the jaw is
+  // at 12 deg; without the cut the side is the jaw's: 10.4 deg).
+  Eigen::Vector3d const& l = fit.lines[upper];
+  EXPECT_LT(std::abs(l.x()), std::sin(3.0 * M_PI / 180.0)) << l.transpose();
+  EXPECT_NEAR(-l.z() / l.y(), 100.0, 0.5);
+  for (auto const& q : fit.points[upper]) EXPECT_LE(q.x(), j.x + 8.0);
+}

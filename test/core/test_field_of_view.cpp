@@ -24,6 +24,11 @@ TEST(FieldOfView, FullRectangle) {
   EXPECT_NEAR(f.depth.at<float>(0, 80), 1.f, 0.5f);
   EXPECT_NEAR(f.depth.at<float>(60, 0), 1.f, 0.5f);
   EXPECT_NEAR(f.depth.at<float>(30, 10), 11.f, 1.0f);
+  // depthAt(): the nearest pixel's depth, clamped to the image; 0 without a depth map.
+  EXPECT_EQ(depthAt(f, {10.4, 29.6}), f.depth.at<float>(30, 10));
+  EXPECT_EQ(depthAt(f, {-7.0, 60.2}), f.depth.at<float>(60, 0));
+  EXPECT_EQ(depthAt(f, {500.0, 500.0}), f.depth.at<float>(119, 159));
+  EXPECT_EQ(depthAt(FieldOfView{}, {10.0, 10.0}), 0.0);
 }
 
 TEST(FieldOfView, CircularWithBlackSurround) {

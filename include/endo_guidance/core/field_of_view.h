@@ -35,6 +35,9 @@ FieldOfView detectFieldOfView(cv::Mat const& bgr, FieldOfViewParams const& param
 /// `depth` over +-3 px, unnormalised; zero where the depth is flat or unknown.
 Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p);
 
+/// The distance (px) to the area's edge at the pixel nearest to x (processing px, clamped to the
+/// image); 0 when `depth` is empty.
+double depthAt(FieldOfView const& fov, Eigen::Vector2d const& x);
 /// Whether the pixel nearest to x (processing px) is inside the area.
 bool insideView(FieldOfView const& fov, Eigen::Vector2d const& x);
 
