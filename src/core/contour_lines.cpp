@@ -447,17 +447,32 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
 }
 
 // The side of a region whose boundary, from the entry, is not a straight line (a grey blob
-// merged with the shaft near the entry: gauze): the straight stretch of `chain` (the boundary
-// from the entry to the point farthest from the seed) that is near-parallel to the other side's
-// line `other` (the contours of a cylinder meet at most max_angle_deg apart) and has the most
-// points within 1 px; its longest run along the chain (gaps of max_gap_points allowed).
-std::optional<FollowedSide> parallelSide(std::vector<Eigen::Vector2d> const& chain, FollowedSide const& other_side,
+// merged with the shaft near the entry: gauze): the straight stretch of `head` (the boundary
+// from the entry to the point farthest from the seed), beside the other side (within its extent
+// along it), that is near-parallel to the other side's line `other` (the contours of a cylinder
+// meet at most max_angle_deg apart) and has the most points within 1 px; its longest run along
+// the boundary (gaps of max_gap_points allowed).
+std::optional<FollowedSide> parallelSide(std::vector<Eigen::Vector2d> const& head, FollowedSide const& other_side,
                                          ContourLinesParams const& p, std::uint64_t seed) {
   Eigen::Vector3d const& other = other_side.line;
-  int const n = static_cast<int>(chain.size());
-  if (n < p.min_side_points) return std::nullopt;
   double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
   Eigen::Vector2d const od(-other.y(), other.x());
+  auto extent = [&](std::vector<Eigen::Vector2d> const& v) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (auto const& q : v) {
+      lo = std::min(lo, od.dot(q));
+      hi = std::max(hi, od.dot(q));
+    }
+    return std::make_pair(lo, hi);
+  };
+  auto const [a0, a1] = extent(other_side.points);
+  // Only the stretch beside the other side: where the region also holds a touching instrument
+  // beyond the tip, that instrument's edges (near-parallel too, and longer) are not this side.
+  std::vector<Eigen::Vector2d> chain;
+  for (auto const& q : head)
+    if (double const t = od.dot(q); t >= a0 && t <= a1) chain.push_back(q);
+  int const n = static_cast<int>(chain.size());
+  if (n < p.min_side_points) return std::nullopt;
   std::mt19937_64 rng(seed);
   std::uniform_int_distribution<int> pick(0, n - 1);
   Eigen::Vector3d best = Eigen::Vector3d::Zero();
@@ -495,15 +510,6 @@ std::optional<FollowedSide> parallelSide(std::vector<Eigen::Vector2d> const& cha
   if (static_cast<int>(f.points.size()) < p.min_side_points) return std::nullopt;
   // A side of the same shaft: at least half as long as the other, and beside it for most of its
   // length (not a short straight stretch of the blob's outline).
-  auto extent = [&](std::vector<Eigen::Vector2d> const& v) {
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (auto const& q : v) {
-      lo = std::min(lo, od.dot(q));
-      hi = std::max(hi, od.dot(q));
-    }
-    return std::make_pair(lo, hi);
-  };
-  auto const [a0, a1] = extent(other_side.points);
   auto const [b0, b1] = extent(f.points);
   double const overlap = std::min(a1, b1) - std::max(a0, b0);
   if (b1 - b0 < p.min_parallel_side_ratio * (a1 - a0) || overlap < p.min_parallel_side_ratio * (b1 - b0)) return std::nullopt;

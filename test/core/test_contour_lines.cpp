@@ -5,10 +5,12 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/contour_lines.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/segmentation.h"
+#include "endo_guidance/core/sigma_filter.h"
 
 using namespace endo_guidance::core;
 
@@ -349,4 +351,47 @@ TEST(ContourLines, AShortShaftsSideEndsWhereItsLongerJawBends) {
   EXPECT_LT(std::abs(l.x()), std::sin(3.0 * M_PI / 180.0)) << l.transpose();
   EXPECT_NEAR(-l.z() / l.y(), 100.0, 0.5);
   for (auto const& q : fit.points[upper]) EXPECT_LE(q.x(), j.x + 8.0);
+}
+
+TEST(ContourLines, TheParallelSideIsBesideTheOtherNotOnATouchingInstrument) {
+  // The rendered hard scene, frame 20: the left shaft's region holds the gauze blob at its entry
+  // and, at 24, the right shaft touching its tip. Its upper boundary runs along the gauze, the
+  // left shaft's upper edge, then the right shaft's (near-parallel too, and longer). The side
+  // taken beside the lower one must be the left shaft's own upper edge: before, the longer
+  // edge beyond the tip was picked and the pair refused as not parallel.
+  SyntheticSceneOptions so;
+  so.breathing_amplitude = 0.002;
+  SyntheticScene scene(defaultInstruments(), so);
+  RenderOptions ro;
+  ro.membranes = true;
+  ro.gauze = true;
+  ro.noise_sigma = 4.0;
+  ro.jpeg_quality = 80;
+  SceneRenderer renderer(so.width, so.height, ro);
+  auto const views = scene.frame(20);
+  cv::Mat const img = renderer.render(views, 20);
+  ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom
+  cv::Mat small, feature, filtered;
+  cv::resize(img, small, img.size() / 2, 0, 0, cv::INTER_AREA);
+  ColourFeature().compute(small, feature);
+  sigmaFilter(feature, filtered, 1, 10);
+  FieldOfView const fov = detectFieldOfView(small);
+  RegionGrower grower;
+  grower.reset(filtered, fov);
+  auto const region = grower.grow({46, 236}, 24);  // the seed under the gauze
+  ASSERT_TRUE(region);
+  ContourLinesParams p;
+  SideFit const fit = fitSides(*region, fov, 2, p);
+  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
+  EXPECT_TRUE(fit.parallel);
+  EXPECT_TRUE(fit.merged);
+  // Each side within 2 deg of one of the true contour lines, one per line.
+  auto angle = [](Eigen::Vector3d const& a, Eigen::Vector3d const& b) {
+    return std::acos(std::min(1.0, std::abs(a.head<2>().normalized().dot(b.head<2>().normalized())))) * 180.0 / M_PI;
+  };
+  int const k = angle(fit.lines[0], truth.lines[0]) < angle(fit.lines[0], truth.lines[1]) ? 0 : 1;
+  EXPECT_LT(angle(fit.lines[0], truth.lines[k]), 2.0);
+  EXPECT_LT(angle(fit.lines[1], truth.lines[1 - k]), 2.0);
+  p.min_parallel_side_ratio = 0.0;  // without the parallel side: refused
+  EXPECT_NE(fitSides(*region, fov, 2, p).rejection, ContourRejection::kNone);
 }
