@@ -210,7 +210,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     int const strip_level = *std::max_element(T.begin(), T.end());
     // Then, above the lowered levels, the absolute ones: the tissue level taken along the border
     // can be low where a grey blob (gauze) or a dark corner lies on it, not beside the shaft
-    // (hard scene frames 0-39: the left shaft under the gauze was grown only below its metal's
+    // (hard scene frames 3-10: the left shaft beside the gauze was grown only below its metal's
     // level). They are tried only after the lowered ones (ascending: a region that leaks stops
     // the search).
     for (int t : params_.regions.thresholds)
