@@ -206,15 +206,6 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         int const rel = static_cast<int>(std::lround(seed.mean_value + fr[i] * (seed.background - seed.mean_value)));
         T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
       }
-    // The strip search's interior level: the highest of these.
-    int const strip_level = *std::max_element(T.begin(), T.end());
-    // Then, above the lowered levels, the absolute ones: the tissue level taken along the border
-    // can be low where a grey blob (gauze) or a dark corner lies on it, not beside the shaft
-    // (hard scene frames 3-10: the left shaft beside the gauze was grown only below its metal's
-    // level). They are tried only after the lowered ones (ascending: a region that leaks stops
-    // the search).
-    for (int t : params_.regions.thresholds)
-      if (t > strip_level) T.push_back(t);
     Memory const* mem = remembered(seed);
     if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
       // (a seed whose regions all leaked has none to claim)
@@ -241,7 +232,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
         have_gradient = true;
       }
-      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
+      int const level = *std::max_element(T.begin(), T.end());
+      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, level, scale, params_.strip, params_.contours, previous);
       if (!sc) return;
       ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
       if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
@@ -260,7 +252,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       }
       best = sc->region;
       best_fit = std::move(f);
-      best_level = static_cast<int>(params_.regions.thresholds.size()) - 1;  // the strip level's index
+      best_level = static_cast<int>(T.size()) - 1;
       best_score = sc->score;
       best_strip = std::move(sc);
     };
