@@ -5,6 +5,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
@@ -379,10 +380,11 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
   int const n = static_cast<int>(chain.size());
   if (n < p.min_side_points) return std::nullopt;
   int const m = std::clamp(n / 3, p.min_side_points, 80);
-  bool cut = false;  // the side was cut at a bend of the head
-  auto rl = fitLineLMedS(std::vector<Eigen::Vector2d>(chain.begin(), chain.begin() + m), p.lmeds_samples, seed);
+  auto const rl = fitLineLMedS(std::vector<Eigen::Vector2d>(chain.begin(), chain.begin() + m), p.lmeds_samples, seed);
   if (!rl || rl->inliers.size() < p.min_inlier_fraction * m) return std::nullopt;
+  Eigen::Vector3d l = rl->line;
   double tol = std::max(2.5 * rl->sigma, 1.0);
+  bool cut = false;  // the side was cut at a bend of the head
   // The side starts at the entry. A head that spans a short shaft and its longer jaw (at another
   // angle) holds two edges: the median picks the jaw's, or a line between the two (a wide
   // residual scale), and the side found would not be the shaft's. The head is split at the
@@ -392,7 +394,8 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
   // border before it turns inward). That side is followed without refits (they would lean onto
   // the jaw).
   if (!fov.depth.empty() && m >= 2 * p.min_side_points) {
-    std::vector<Eigen::Matrix<double, 5, 1>> acc(static_cast<std::size_t>(m) + 1, Eigen::Matrix<double, 5, 1>::Zero());
+    std::array<Eigen::Matrix<double, 5, 1>, 81> acc;  // m <= 80
+    acc[0].setZero();
     for (int i = 0; i < m; ++i) {
       Eigen::Vector2d const& q = chain[i];
       acc[i + 1] = acc[i];
@@ -416,14 +419,13 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
       std::vector<Eigen::Vector2d> const first(chain.begin(), chain.begin() + best_b);
       auto const l1 = fitLineLS(first);
       if (l1 && depthAt(fov, first.back()) - depthAt(fov, first.front()) >= 0.5 * (first.back() - first.front()).norm()) {
-        rl->line = *l1;
+        l = *l1;
         tol = std::max(2.5 * std::sqrt(sse(0, best_b) / best_b), 1.0);
         cut = true;
       }
     }
   }
   FollowedSide f;
-  Eigen::Vector3d l = rl->line;
   int misses = 0, last = -1;
   for (int i = 0; i < n; ++i) {
     if (std::abs(l.head<2>().dot(chain[i]) + l.z()) <= tol) {
