@@ -5,12 +5,10 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/contour_lines.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/segmentation.h"
-#include "endo_guidance/core/sigma_filter.h"
 
 using namespace endo_guidance::core;
 
@@ -371,13 +369,12 @@ TEST(ContourLines, TheParallelSideIsBesideTheOtherNotOnATouchingInstrument) {
   auto const views = scene.frame(20);
   cv::Mat const img = renderer.render(views, 20);
   ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom
-  cv::Mat small, feature, filtered;
-  cv::resize(img, small, img.size() / 2, 0, 0, cv::INTER_AREA);
-  ColourFeature().compute(small, feature);
-  sigmaFilter(feature, filtered, 1, 10);
-  FieldOfView const fov = detectFieldOfView(small);
+  // The segmenter's own filtered feature and field of view (processing scale 2) for this frame.
+  InstrumentSegmenter seg;
+  seg.process(img);
+  FieldOfView const& fov = seg.fieldOfView();
   RegionGrower grower;
-  grower.reset(filtered, fov);
+  grower.reset(seg.feature(), fov);
   auto const region = grower.grow({46, 236}, 24);  // the seed under the gauze
   ASSERT_TRUE(region);
   ContourLinesParams p;
