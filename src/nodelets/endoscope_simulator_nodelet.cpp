@@ -149,6 +149,9 @@ void EndoscopeSimulatorNodelet::onInit() {
 }
 
 void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
+  // Read once, before the stamp: a frame is drawn with all instruments or none (the flag may be
+  // set while it is drawn), and one stamped after the occlude call returned has none.
+  bool const occluded = occluded_;
   ros::Time const stamp = ros::Time::now();
   double const t = (ros::WallTime::now() - start_).toSec();
   Eigen::Vector3d const breathing =
@@ -182,7 +185,7 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
     auto const view = core::viewOfInstrument(K_, static_cast<int>(info_.width), static_cast<int>(info_.height), trocar_c, tip_c,
                                              radius_, static_cast<int>(i), jaw_length_);
     if (!view) continue;  // tip out of view
-    if (!occluded_) views.push_back(*view);
+    if (!occluded) views.push_back(*view);
     core::CylinderPose pose;
     pose.axis = view->axis;
     pose.distance = view->axis.distanceToOrigin();

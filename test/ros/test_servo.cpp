@@ -20,6 +20,7 @@
 #include <mutex>
 
 #include "endo_guidance/InsertionPointArray.h"
+#include "endo_guidance/InstrumentAxisArray.h"
 #include "endo_guidance/InstrumentVelocity.h"
 #include "endo_guidance/ServoState.h"
 #include "endo_guidance/ServoTarget.h"
@@ -203,22 +204,39 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   std::atomic<bool> hidden{false};
   std::atomic<double> hidden_from{1e300};  // sim time after which frames are rendered hidden
   std::atomic<int> nonzero_after{0};
+  std::atomic<bool> occluding{false}, last_zero{false};
+  std::atomic<int> nonzero_run{0};  // non-zero commands in a row
   // A frame stamped after the occlusion call returned was rendered without the instruments (the
-  // simulator stamps a frame before drawing it).
+  // simulator reads the flag once per frame, before its stamp). One stamped while the call was
+  // under way may be too: a zero command is counted from the call on, so it may come before the
+  // first frame known to be hidden (a negative delay).
   auto img_sub = nh.subscribe<sensor_msgs::Image>("endoscope/image_raw", 5, [&](sensor_msgs::Image::ConstPtr const& im) {
     if (hidden && im->header.stamp.toSec() > hidden_from && first_hidden_image == 0.0) first_hidden_image = ros::WallTime::now().toSec();
+  });
+  // No shaft may be reported on a frame without instruments (tissue only).
+  std::atomic<int> phantom_axes{0};
+  auto axes_sub = nh.subscribe<InstrumentAxisArray>("endoscope/instruments", 5, [&](InstrumentAxisArray::ConstPtr const& a) {
+    if (hidden && a->header.stamp.toSec() > hidden_from) phantom_axes += static_cast<int>(a->axes.size());
   });
   double last_nonzero_rate = 0.0;
   auto cmd_sub = nh.subscribe<InstrumentVelocity>("arm_0/command", 50, [&](InstrumentVelocity::ConstPtr const& c) {
     bool const zero = c->pan_rate == 0.0 && c->tilt_rate == 0.0 && c->insertion_rate == 0.0;
     if (!zero) last_nonzero_rate = std::abs(c->pan_rate) + std::abs(c->tilt_rate);
-    if (first_hidden_image > 0.0 && zero && first_zero == 0.0) first_zero = ros::WallTime::now().toSec();
+    last_zero = zero;
+    nonzero_run = zero ? 0 : nonzero_run + 1;
+    if (occluding && zero && first_zero == 0.0) first_zero = ros::WallTime::now().toSec();
     if (first_zero > 0.0 && !zero) ++nonzero_after;
   });
-  ros::WallDuration(0.6).sleep();
+  // Hidden once the servo has driven the arm for 5 frames, well before the arm reaches the
+  // other instruments on its way (0.6-0.7 s after the target: there its tip is occluded by
+  // arm_1 and jumps, and the servo stops for that, before the instruments vanish).
+  for (int i = 0; i < 200 && nonzero_run < 5; ++i) ros::WallDuration(0.01).sleep();
+  EXPECT_GE(nonzero_run.load(), 5) << "the servo did not drive the arm to the far target";
   EXPECT_GT(last_nonzero_rate, 0.0) << "the servo was not moving before the loss";
+  EXPECT_FALSE(last_zero) << "the servo had stopped before the instruments vanished";
   std_srvs::SetBool occ;
   occ.request.data = true;
+  occluding = true;
   ASSERT_TRUE(test::callService("endoscope_simulator/occlude", occ));  // (idempotent)
   hidden_from = ros::Time::now().toSec();
   hidden = true;
@@ -230,6 +248,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
               delay * 1e3, nonzero_after.load());
   EXPECT_LT(delay, 0.04);
   EXPECT_EQ(nonzero_after.load(), 0);
+  EXPECT_EQ(phantom_axes.load(), 0) << "shafts reported on frames without instruments";
   occ.request.data = false;
   test::callService("endoscope_simulator/occlude", occ);
 }
