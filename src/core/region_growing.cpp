@@ -3,6 +3,9 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
+#include <cmath>
+
 namespace endo_guidance::core {
 
 void RegionGrower::reset(cv::Mat const& feature, FieldOfView const& fov) {
@@ -67,6 +70,34 @@ void RegionGrower::claim(Region const& r, int label, std::vector<cv::Point> cons
   m.setTo(0, filled);
   m.setTo(1, in);
   labels_(box).setTo(label, in);
+}
+
+GrowthLevels growthLevels(RegionGrowingParams const& p, float seed, float background) {
+  GrowthLevels g;
+  g.thresholds = p.thresholds;
+  auto& T = g.thresholds;
+  if (T.empty()) return g;
+  // only on a dark border, and where the tissue around is brighter than the seed
+  if (background < p.dark_border_level && background > seed + 4.f)
+    for (std::size_t i = 0; i < T.size() && i < p.background_fractions.size(); ++i) {
+      int const rel = static_cast<int>(std::lround(seed + p.background_fractions[i] * (background - seed)));
+      T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed) + 2));  // only ever lowered
+    }
+  g.strip_level = *std::max_element(T.begin(), T.end());
+  // Tried only after the lowered ones (ascending: in a full search a region that leaks stops it).
+  for (int t : p.thresholds)
+    if (t > g.strip_level) T.push_back(t);
+  return g;
+}
+
+int rememberedLevel(std::vector<int> const& levels, int configured, int level, int threshold) {
+  int const n = static_cast<int>(levels.size());
+  if (n == 0) return -1;
+  if (level >= 0 && level < std::min(configured, n)) return level;
+  int best = 0;
+  for (int i = 1; i < n; ++i)
+    if (std::abs(levels[i] - threshold) < std::abs(levels[best] - threshold)) best = i;
+  return best;
 }
 
 }  // namespace endo_guidance::core

@@ -197,25 +197,28 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
     // seed near last frame's rejected region only re-grows that region (to claim it) and is
     // searched in full again every `full_search_every` frames (its strip search: stripSearchDue()).
-    // Growth levels: the absolute thresholds, capped between the seed's and the tissue's levels.
-    std::vector<int> T = params_.regions.thresholds;
-    auto const& fr = params_.regions.background_fractions;
-    // only on a dark border, and where the tissue around is brighter than the seed
-    if (seed.background < params_.regions.dark_border_level && seed.background > seed.mean_value + 4.f)
-      for (std::size_t i = 0; i < T.size() && i < fr.size(); ++i) {
-        int const rel = static_cast<int>(std::lround(seed.mean_value + fr[i] * (seed.background - seed.mean_value)));
-        T[i] = std::min(T[i], std::max(rel, static_cast<int>(seed.mean_value) + 2));  // only ever lowered
-      }
+    // Growth levels (region_growing.h): the thresholds, lowered toward the seed's level on a dark
+    // border and followed there by the absolute ones above them (hard scene frames 0-39: the left
+    // shaft beside the gauze was grown only below its metal's level).
+    GrowthLevels const levels = growthLevels(params_.regions, seed.mean_value, seed.background);
+    std::vector<int> const& T = levels.thresholds;
+    int const strip_level = levels.strip_level;
     Memory const* mem = remembered(seed);
+    // Last frame's level in this frame's list, which is longer on a dark border.
+    int const mem_level = mem ? rememberedLevel(T, static_cast<int>(params_.regions.thresholds.size()), mem->level, mem->threshold) : 0;
+    auto remember = [&](Memory m) {
+      m.threshold = T[m.level];
+      memory_now.push_back(std::move(m));
+    };
     if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
       // (a seed whose regions all leaked has none to claim)
-      if (auto r = mem->grown ? grower_.grow(seed.position, T[mem->level], si) : std::nullopt) {
+      if (auto r = mem->grown ? grower_.grow(seed.position, T[mem_level], si) : std::nullopt) {
         res.regions.push_back(*r);
         res.region_status.push_back(mem->why);
         grower_.claim(*r, 255);
       }
-      memory_now.push_back({seed.position, mem->level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails,
-                            seed.width, std::nullopt, mem->grown});
+      remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails, seed.width,
+                std::nullopt, mem->grown});
       continue;
     }
     std::optional<Region> best;
@@ -232,8 +235,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
         have_gradient = true;
       }
-      int const level = *std::max_element(T.begin(), T.end());
-      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, level, scale, params_.strip, params_.contours, previous);
+      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
       if (!sc) return;
       ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
       if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
@@ -252,7 +254,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       }
       best = sc->region;
       best_fit = std::move(f);
-      best_level = static_cast<int>(T.size()) - 1;
+      best_level = static_cast<int>(params_.regions.thresholds.size()) - 1;  // the strip level's index
       best_score = sc->score;
       best_strip = std::move(sc);
     };
@@ -317,7 +319,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         // (not deferred for a shaft that was found so in the last frame: its level is tried first)
         bool const defer = sf.parallel && !(tracked && mem->parallel);
         (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li});
-        if (!defer && tracked && li == mem->level && score >= 0.85 * mem->score) break;  // as good as before
+        if (!defer && tracked && li == mem_level && score >= 0.85 * mem->score) break;  // as good as before
       }
       refineCandidates(cands);
     };
@@ -328,7 +330,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     } else if (!best && mem && mem->accepted) {
       std::vector<int> near;
       for (int d : {0, -1, 1})
-        if (mem->level + d >= 0 && mem->level + d < static_cast<int>(T.size())) near.push_back(mem->level + d);
+        if (mem_level + d >= 0 && mem_level + d < static_cast<int>(T.size())) near.push_back(mem_level + d);
       tryLevels(near, true);
       // Lost about last frame's level: the full search now, not `full_search_every` frames later,
       // over the levels not grown yet (those gave regions that were refused or leaked).
@@ -347,7 +349,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     if (strip_run) tryStrip(nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
     if (best) {
-      memory_now.push_back({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
+      remember({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
       memory_now.back().parallel = best_parallel;
     }
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
@@ -361,9 +363,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     if (!best && why != ContourRejection::kDuplicate) {
       int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
       // (a seed that only had its strip searched has had no full search: due at once next time)
-      memory_now.push_back({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
-                            strip_run ? 0 : age + elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt,
-                            smallest.has_value()});
+      remember({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
+                strip_run ? 0 : age + elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
     }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;

@@ -3,6 +3,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <functional>
 #include <map>
 #include <stdexcept>
@@ -152,6 +153,13 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   } catch (YAML::Exception const& e) {
     throw std::runtime_error(std::string("pipeline parameters: wrong value type: ") + e.what());
   }
+  // The growth levels index these lists (region_growing.h): refused, not guessed.
+  auto const& g = S.regions.thresholds;
+  if (g.empty() || !std::is_sorted(g.begin(), g.end()) || std::adjacent_find(g.begin(), g.end()) != g.end() || g.front() < 0 || g.back() > 255)
+    throw std::runtime_error("pipeline parameters: segmentation/grow_thresholds must be strictly ascending feature levels in [0, 255]");
+  for (double f : S.regions.background_fractions)
+    if (!(f >= 0.0 && f <= 1.0))
+      throw std::runtime_error("pipeline parameters: segmentation/grow_background_fractions must lie in [0, 1]");
   return unknown;
 }
 

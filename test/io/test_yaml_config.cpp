@@ -43,6 +43,11 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(p.segmentation.regions.thresholds, (std::vector<int>{10, 20}));
   EXPECT_EQ(p.insertion_points.tracker.memory_views, 100.0);
   EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", "segmentation:\n  sigma_radiuss: 2\n"), p), std::runtime_error);
+  // Growth levels that cannot be indexed or ordered are refused.
+  for (char const* bad : {"[]", "[20, 10]", "[10, 10]", "[10, 300]"})
+    EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", std::string("segmentation:\n  grow_thresholds: ") + bad + "\n"), p), std::runtime_error)
+        << bad;
+  EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", "segmentation:\n  grow_background_fractions: [0.4, 1.5]\n"), p), std::runtime_error);
   // config/pipeline.yaml holds exactly the code defaults.
   PipelineParams const defaults;
   PipelineParams shipped;

@@ -25,6 +25,23 @@ struct RegionGrowingParams {
   int max_regions = 8;             ///< accepted regions per frame
 };
 
+/// The growth levels of one seed, ascending.
+struct GrowthLevels {
+  std::vector<int> thresholds;  ///< first the configured list (lowered on a dark border), then the absolute levels above them
+  int strip_level = 0;          ///< the highest of the configured list: the strip search's interior level
+};
+/// The levels tried for a seed of mean feature `seed` whose border background is `background`:
+/// on a dark border, the configured thresholds lowered toward the seed's level
+/// (min(t_i, seed + f_i (background - seed)), at least seed + 2), then the absolute thresholds
+/// above the highest lowered one (the background taken along the border is also low where a
+/// grey blob or a dark corner lies on it, not beside the shaft); elsewhere the thresholds.
+GrowthLevels growthLevels(RegionGrowingParams const& p, float seed, float background);
+/// The index in `levels` (a seed's levels this frame) of the level remembered from the last frame
+/// as index `level` of threshold `threshold`: a place in the configured list is kept (the lowered
+/// levels follow the tissue's level), an absolute level added above them is found again by its
+/// threshold, the nearest if it is not there (the list is shorter where the border is no longer dark).
+int rememberedLevel(std::vector<int> const& levels, int configured, int level, int threshold);
+
 /// A grown region and its ordered outer boundary.
 struct Region {
   int seed_index = -1;               ///< the seed it grew from

@@ -91,6 +91,7 @@ class InstrumentSegmenter {
     std::optional<StripCandidate> strip;  // the strip it was found as (strip search), if so
     bool grown = true;      // a region was kept (false: every level leaked)
     bool parallel = false;  // accepted with a side parallel to the other (SideFit::parallel: merged with a blob)
+    int threshold = 0;      // the growth threshold of `level` (an absolute level added above the lowered ones is found again by it)
   };
   Memory const* remembered(Seed const& seed) const;
   bool stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const;
