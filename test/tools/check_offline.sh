@@ -29,6 +29,37 @@ assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
 print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts")
 PY
 test "$(ls "$T/ov" | wc -l)" -eq 119
+# A bag (sensor_msgs/Image + camera_info beside it, stamps since the epoch): its camera_info is
+# used without --camera, and each frame keeps its own stamp.
+/usr/bin/python3 - "$T/seq/frames" "$T/seq.bag" <<'PY'
+import glob, sys, cv2, rosbag, rospy
+from sensor_msgs.msg import CameraInfo, Image
+files = sorted(glob.glob(sys.argv[1] + "/*.png"))[:40]
+with rosbag.Bag(sys.argv[2], "w") as b:
+    for k, f in enumerate(files):
+        im = cv2.imread(f)
+        if im is None:
+            continue
+        t = rospy.Time(1795390640, 123456000) + rospy.Duration(0.04 * k)
+        m = Image(height=im.shape[0], width=im.shape[1], encoding="bgr8", step=im.shape[1] * 3, data=im.tobytes())
+        m.header.stamp, m.header.frame_id = t, "endoscope_optical_frame"
+        ci = CameraInfo(height=im.shape[0], width=im.shape[1], distortion_model="plumb_bob", D=[0.0] * 5,
+                        K=[500, 0, 319.5, 0, 500, 239.5, 0, 0, 1], R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
+                        P=[500, 0, 319.5, 0, 0, 500, 239.5, 0, 0, 0, 1, 0])
+        ci.header = m.header
+        b.write("/endoscope/image_raw", m, t)
+        b.write("/endoscope/camera_info", ci, t)
+PY
+"$BIN/endo_guidance_offline" --radius 0.004 --image-topic /endoscope/image_raw --output "$T/bag.jsonl" --quiet "$T/seq.bag"
+/usr/bin/python3 - "$T/bag.jsonl" <<'PY'
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+assert len(rows) == 40, len(rows)
+for k, r in enumerate(rows):
+    assert abs(r["stamp"] - (1795390640.123456 + 0.04 * k)) < 1e-5, (k, r["stamp"])
+assert sum(len(r["instruments"]) for r in rows) > 60
+print("offline bag ok:", len(rows), "frames, stamps to the microsecond")
+PY
 # Bad arguments and bad camera files fail with a message, not a crash.
 if "$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" "$T/seq/frames" 2>/dev/null; then exit 1; fi
 sed 's/data: \[500/data: [0/' "$T/seq/camera.yaml" > "$T/zero.yaml"
