@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/core/colour_feature.h"
+#include "endo_guidance/core/image_reduction.h"
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/sigma_filter.h"
@@ -128,14 +129,14 @@ void BM_Stage_Resize(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
   cv::Mat small;
-  for (auto _ : st) cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  for (auto _ : st) reduceImage(f.images[0], s, small);
 }
 
 void BM_Stage_ColourFeature(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
   cv::Mat small, feat;
-  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  reduceImage(f.images[0], s, small);
   ColourFeature const cf;
   for (auto _ : st) cf.compute(small, feat);
 }
@@ -144,7 +145,7 @@ void BM_Stage_SigmaFilter(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
   cv::Mat small, feat, out;
-  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  reduceImage(f.images[0], s, small);
   ColourFeature().compute(small, feat);
   for (auto _ : st) sigmaFilter(feat, out, 1, 10);
 }
@@ -163,7 +164,7 @@ void BM_Stage_StripSearch(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
   cv::Mat small, feat, filt, gx, gy;
-  cv::resize(f.images[0], small, f.images[0].size() / s, 0, 0, cv::INTER_AREA);
+  reduceImage(f.images[0], s, small);
   ColourFeature().compute(small, feat);
   sigmaFilter(feat, filt, 1, 10);
   FieldOfView const fov = detectFieldOfView(small);

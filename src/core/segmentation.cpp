@@ -8,36 +8,12 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
+#include "endo_guidance/core/image_reduction.h"
 #include "endo_guidance/core/sigma_filter.h"
 
 namespace endo_guidance::core {
 
 namespace {
-// Box (area) downsampling by an integer factor, BGR: the same result as cv::resize(INTER_AREA)
-// at integer scale, but one pass (vertical sums in 16 bits, then horizontal block sums);
-// OpenCV's area path is slow for factors above 2 (5 ms for 1920x1080 / 6 here).
-void boxDownsample(cv::Mat const& src, int f, cv::Mat& dst) {
-  int const W = src.cols / f, H = src.rows / f, n = 3 * W * f;
-  dst.create(H, W, CV_8UC3);
-  std::vector<std::uint16_t> acc(static_cast<std::size_t>(n));
-  std::uint32_t const inv = (65536u * 256u) / static_cast<std::uint32_t>(f * f);  // 8.24 fixed point / 256
-  for (int y = 0; y < H; ++y) {
-    std::fill(acc.begin(), acc.end(), 0);
-    for (int r = 0; r < f; ++r) {
-      std::uint8_t const* __restrict in = src.ptr<std::uint8_t>(y * f + r);
-      std::uint16_t* __restrict a = acc.data();
-      for (int i = 0; i < n; ++i) a[i] = static_cast<std::uint16_t>(a[i] + in[i]);
-    }
-    std::uint8_t* out = dst.ptr<std::uint8_t>(y);
-    for (int x = 0; x < W; ++x)
-      for (int ch = 0; ch < 3; ++ch) {
-        std::uint32_t sum = 0;
-        for (int j = 0; j < f; ++j) sum += acc[static_cast<std::size_t>(3 * (x * f + j) + ch)];
-        out[3 * x + ch] = static_cast<std::uint8_t>((sum * inv + (1u << 23)) >> 24);
-      }
-  }
-}
-
 // Whether seeds a and b (on the region's boundary) are joined by a stretch of the boundary that
 // runs along the field-of-view edge (no deeper inside than the seeds, plus `margin` px): the two
 // are one entry.
@@ -152,10 +128,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   SegmentationResult res;
   int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
   res.scale = scale;
-  // OpenCV's area resampling has a fast path for factor 2 only.
-  if (scale == 2) cv::resize(bgr, small_, cv::Size(bgr.cols / 2, bgr.rows / 2), 0, 0, cv::INTER_AREA);
-  else if (scale > 2) boxDownsample(bgr, scale, small_);
-  else small_ = bgr;
+  reduceImage(bgr, scale, small_);  // (image_reduction.h)
   if (small_.size() != fov_size_ || ++frames_since_fov_ >= params_.fov_refresh) {
     fov_ = detectFieldOfView(small_, params_.fov);
     fov_size_ = small_.size();

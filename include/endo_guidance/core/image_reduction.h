@@ -1,0 +1,16 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <opencv2/core.hpp>
+
+namespace endo_guidance::core {
+
+/// The colour image reduced by an integer factor f for the region stages: each output pixel is
+/// the rounded mean of an f x f block (the last cols % f columns and rows % f rows are dropped,
+/// so that x_small = (x_full - (f - 1) / 2) / f holds everywhere: cv::resize of an odd-sized
+/// image to half its size spreads the blocks instead, and takes OpenCV's slow general path).
+/// f = 1 shares `src`; f = 2 is cv::resize(INTER_AREA), (a + b + c + d + 2) >> 2; other factors
+/// round sum / f^2 to nearest (half up), in one pass.
+void reduceImage(cv::Mat const& src, int f, cv::Mat& dst);
+
+}  // namespace endo_guidance::core

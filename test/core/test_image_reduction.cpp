@@ -1,0 +1,78 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "endo_guidance/core/image_reduction.h"
+
+using namespace endo_guidance::core;
+
+namespace {
+cv::Mat randomImage(int w, int h, int seed) {
+  cv::Mat m(h, w, CV_8UC3);
+  cv::RNG rng(seed);
+  rng.fill(m, cv::RNG::UNIFORM, 0, 256);
+  return m;
+}
+// The rounded mean of each f x f block, computed directly.
+cv::Mat blockMeans(cv::Mat const& src, int f) {
+  cv::Mat out(src.rows / f, src.cols / f, CV_8UC3);
+  for (int y = 0; y < out.rows; ++y)
+    for (int x = 0; x < out.cols; ++x)
+      for (int k = 0; k < 3; ++k) {
+        int s = 0;
+        for (int j = 0; j < f; ++j)
+          for (int i = 0; i < f; ++i) s += src.at<cv::Vec3b>(f * y + j, f * x + i)[k];
+        out.at<cv::Vec3b>(y, x)[k] = static_cast<std::uint8_t>((2 * s + f * f) / (2 * f * f));  // round half up
+      }
+  return out;
+}
+int maxDiff(cv::Mat const& a, cv::Mat const& b) {
+  cv::Mat d;
+  cv::absdiff(a, b, d);
+  double m = 0.0;
+  cv::minMaxLoc(d.reshape(1), nullptr, &m);
+  return static_cast<int>(m);
+}
+}  // namespace
+
+TEST(ImageReduction, HalvingEqualsOpenCVAreaResamplingBitForBit) {
+  // Widths with and without a SIMD tail (16 output pixels per step), and a submatrix (row stride).
+  for (auto const& wh : {cv::Size(640, 480), cv::Size(720, 576), cv::Size(38, 10), cv::Size(2, 2), cv::Size(66, 6)}) {
+    cv::Mat const src = randomImage(wh.width, wh.height, wh.width);
+    cv::Mat ref, got;
+    cv::resize(src, ref, wh / 2, 0, 0, cv::INTER_AREA);
+    reduceImage(src, 2, got);
+    ASSERT_EQ(got.size(), ref.size());
+    EXPECT_EQ(maxDiff(got, ref), 0) << wh;
+  }
+  cv::Mat const big = randomImage(700, 300, 7);
+  cv::Mat const roi = big(cv::Rect(3, 5, 642, 290));
+  cv::Mat ref, got;
+  cv::resize(roi, ref, roi.size() / 2, 0, 0, cv::INTER_AREA);
+  reduceImage(roi, 2, got);
+  EXPECT_EQ(maxDiff(got, ref), 0);
+}
+
+TEST(ImageReduction, EveryFactorGivesTheRoundedBlockMeansAndDropsTheRemainder) {
+  cv::Mat const src = randomImage(101, 47, 3);  // odd sizes: the last columns and rows are dropped
+  for (int f : {2, 3, 4, 6, 7}) {
+    cv::Mat got;
+    reduceImage(src, f, got);
+    ASSERT_EQ(got.size(), cv::Size(101 / f, 47 / f)) << f;
+    EXPECT_EQ(maxDiff(got, blockMeans(src, f)), 0) << f;
+  }
+  cv::Mat same;
+  reduceImage(src, 1, same);
+  EXPECT_EQ(same.data, src.data);  // shared, not copied
+  // Saturated input stays exact (no 16-bit overflow in the row sums).
+  cv::Mat const white(48, 48, CV_8UC3, cv::Scalar::all(255));
+  for (int f : {2, 12, 16}) {
+    cv::Mat got;
+    reduceImage(white, f, got);
+    EXPECT_EQ(cv::countNonZero(got.reshape(1) != 255), 0) << f;
+  }
+  cv::Mat bad;
+  EXPECT_THROW(reduceImage(cv::Mat(10, 10, CV_8UC1), 2, bad), cv::Exception);
+  EXPECT_THROW(reduceImage(src, 0, bad), cv::Exception);
+}
