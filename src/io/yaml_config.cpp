@@ -153,6 +153,26 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   } catch (YAML::Exception const& e) {
     throw std::runtime_error(std::string("pipeline parameters: wrong value type: ") + e.what());
   }
+  // Values the stages cannot work with are refused here, with the key, not met as a crash or a
+  // silent misbehaviour later (a zero processing width divides by zero).
+  auto need = [](bool ok, char const* key, char const* what) {
+    if (!ok) throw std::runtime_error(std::string("pipeline parameters: ") + key + " must be " + what);
+  };
+  need(p.radius > 0.0 && p.radius < 0.05, "radius", "in (0, 0.05) m");
+  need(S.processing_width >= 32, "segmentation/processing_width", ">= 32 px");
+  need(S.sigma_radius >= 0 && S.sigma_radius <= 8, "segmentation/sigma_radius", "in [0, 8]");
+  need(S.sigma_delta >= 0 && S.sigma_delta <= 255, "segmentation/sigma_delta", "in [0, 255]");
+  need(S.fov_refresh >= 1, "segmentation/fov_refresh", ">= 1");
+  need(S.level_memory_px >= 0, "segmentation/level_memory_px", ">= 0");
+  need(S.full_search_every >= 1, "segmentation/full_search_every", ">= 1");
+  need(S.strip_search_max_every >= 1, "segmentation/strip_search_max_every", ">= 1");
+  need(S.tracking.detect_every >= 1, "segmentation/detect_every", ">= 1");
+  need(S.regions.max_regions >= 1, "segmentation/max_regions", ">= 1");
+  need(S.seeds.threshold >= 0 && S.seeds.threshold <= 255, "segmentation/seed_threshold", "in [0, 255]");
+  need(S.seeds.near_threshold >= 0 && S.seeds.near_threshold <= 255, "segmentation/seed_near_threshold", "in [0, 255]");
+  need(p.pose.min_distance > 0.0 && p.pose.min_distance < p.pose.max_distance, "pose/min_distance",
+       "positive and below pose/max_distance");
+  need(T.max_points >= 0, "insertion_points/max_points", ">= 0 (0: as many as the axes support)");
   // The growth levels index these lists (region_growing.h): refused, not guessed.
   auto const& g = S.regions.thresholds;
   if (g.empty() || !std::is_sorted(g.begin(), g.end()) || std::adjacent_find(g.begin(), g.end()) != g.end() || g.front() < 0 || g.back() > 255)

@@ -48,6 +48,21 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
     EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", std::string("segmentation:\n  grow_thresholds: ") + bad + "\n"), p), std::runtime_error)
         << bad;
   EXPECT_THROW(io::loadPipelineYaml(write("bad.yaml", "segmentation:\n  grow_background_fractions: [0.4, 1.5]\n"), p), std::runtime_error);
+  // Values the stages cannot work with are refused with the key's name (a zero processing width
+  // divided by zero in the segmentation).
+  for (char const* bad : {"radius: 0\n", "radius: -0.004\n", "segmentation:\n  processing_width: 0\n",
+                          "segmentation:\n  sigma_radius: -1\n", "segmentation:\n  detect_every: 0\n",
+                          "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
+                          "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
+                          "insertion_points:\n  max_points: -1\n"}) {
+    PipelineParams q;
+    try {
+      io::loadPipelineYaml(write("bad.yaml", bad), q);
+      ADD_FAILURE() << "accepted: " << bad;
+    } catch (std::runtime_error const& e) {
+      EXPECT_NE(std::string(e.what()).find("must be"), std::string::npos) << e.what();
+    }
+  }
   // config/pipeline.yaml holds exactly the code defaults.
   PipelineParams const defaults;
   PipelineParams shipped;
