@@ -231,12 +231,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  RenderOptions clean;
-  clean.membranes = true;
-  RenderOptions hard = clean;
-  hard.gauze = true;
-  hard.noise_sigma = 4.0;
-  hard.jpeg_quality = 80;
+  RenderOptions const clean, hard = hardRenderOptions();
   RenderOptions bc = clean;
   bc.black_shafts = true;
   bc.circular_fov = true;

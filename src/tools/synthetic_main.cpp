@@ -180,9 +180,7 @@ int main(int argc, char** argv) {
     // The embedded default sequence of the README's main command.
     RenderOptions ro;
     if (scene_name == "hard") {
-      ro.gauze = true;
-      ro.noise_sigma = 4.0;
-      ro.jpeg_quality = 80;
+      ro = hardRenderOptions();
     } else if (scene_name == "black_circular") {
       ro.black_shafts = true;
       ro.circular_fov = true;

@@ -360,12 +360,7 @@ TEST(ContourLines, TheParallelSideIsBesideTheOtherNotOnATouchingInstrument) {
   SyntheticSceneOptions so;
   so.breathing_amplitude = 0.002;
   SyntheticScene scene(defaultInstruments(), so);
-  RenderOptions ro;
-  ro.membranes = true;
-  ro.gauze = true;
-  ro.noise_sigma = 4.0;
-  ro.jpeg_quality = 80;
-  SceneRenderer renderer(so.width, so.height, ro);
+  SceneRenderer renderer(so.width, so.height, hardRenderOptions());
   auto const views = scene.frame(20);
   cv::Mat const img = renderer.render(views, 20);
   ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom

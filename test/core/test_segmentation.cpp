@@ -14,6 +14,17 @@
 using namespace endo_guidance::core;
 
 namespace {
+// The hard evaluation scene (endo_guidance_eval_synthetic --scene hard): 2 mm of breathing.
+struct HardScene {
+  SyntheticSceneOptions options = [] {
+    SyntheticSceneOptions o;
+    o.breathing_amplitude = 0.002;
+    return o;
+  }();
+  SyntheticScene scene{defaultInstruments(), options};
+  SceneRenderer renderer{options.width, options.height, hardRenderOptions()};
+};
+
 struct Stats {
   int visible = 0, found = 0, false_shafts = 0;
   std::vector<double> err;
@@ -170,14 +181,9 @@ TEST(Segmentation, ShaftEnteringNearACorner) {
 // strip search finds the shaft (before, the seed was skipped as claimed, and the right shaft was
 // found in 10 of these 20 frames). The gauze is never reported.
 TEST(Segmentation, ShaftInsideARegionRefusedForAnotherSeed) {
-  RenderOptions ro;
-  ro.gauze = true;
-  ro.noise_sigma = 4.0;
-  ro.jpeg_quality = 80;
-  SyntheticSceneOptions so;
-  so.breathing_amplitude = 0.002;
-  SyntheticScene scene(defaultInstruments(), so);
-  SceneRenderer renderer(so.width, so.height, ro);
+  HardScene hard;
+  SyntheticScene& scene = hard.scene;
+  SceneRenderer const& renderer = hard.renderer;
   InstrumentSegmenter seg;
   int right = 0, right_found = 0, unmatched = 0;
   for (int k = 0; k < 20; ++k) {
@@ -207,15 +213,9 @@ TEST(Segmentation, ShaftInsideARegionRefusedForAnotherSeed) {
 // the left shaft is found, its lines within 1 px of the truth over the part it reports (from its
 // entry to its tip; the lower line leaves the image 90 px before the true entry).
 TEST(Segmentation, AShaftBesideAGreyBlobOnTheBorderIsGrownAtTheAbsoluteLevels) {
-  RenderOptions ro;
-  ro.membranes = true;
-  ro.gauze = true;
-  ro.noise_sigma = 4.0;
-  ro.jpeg_quality = 80;
-  SyntheticSceneOptions so;
-  so.breathing_amplitude = 0.002;
-  SyntheticScene scene(defaultInstruments(), so);
-  SceneRenderer renderer(so.width, so.height, ro);
+  HardScene hard;
+  SyntheticScene& scene = hard.scene;
+  SceneRenderer const& renderer = hard.renderer;
   for (int k : {3, 8}) {
     auto const views = scene.frame(k);
     ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom-left

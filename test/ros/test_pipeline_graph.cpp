@@ -362,8 +362,11 @@ TEST_F(Graph, ResetAndFreezeServices) {
   EXPECT_TRUE(fz.response.success) << fz.response.message;
   geometry_msgs::Point const frozen = p->points.front().position;
   for (int k = 150; k < 200; ++k) ASSERT_TRUE(publish(renderer.render(scene.frame(k), k), ros::Time(t += 0.04)));
-  for (auto const& q : points_.get()->points)
-    if (q.id == id) EXPECT_TRUE(q.position.x == frozen.x && q.position.y == frozen.y && q.position.z == frozen.z);
+  for (auto const& q : points_.get()->points) {
+    if (q.id == id) {
+      EXPECT_TRUE(q.position.x == frozen.x && q.position.y == frozen.y && q.position.z == frozen.z);
+    }
+  }
   fz.request.id = 9999;
   ASSERT_TRUE(callService("endoscope/insertion_points/freeze", fz));
   EXPECT_FALSE(fz.response.success);

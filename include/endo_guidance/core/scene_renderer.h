@@ -20,6 +20,16 @@ struct RenderOptions {
   std::uint64_t seed = 3;
 };
 
+/// The rendering of the "hard" evaluation scene (endo_guidance_eval_synthetic --scene hard, with
+/// 2 mm of breathing): a gauze blob, noise sigma 4, JPEG 80.
+inline RenderOptions hardRenderOptions() {
+  RenderOptions o;
+  o.gauze = true;
+  o.noise_sigma = 4.0;
+  o.jpeg_quality = 80;
+  return o;
+}
+
 /// Renders the synthetic scene (one renderer for the tests, the simulator and the demo bags):
 /// textured red/yellow tissue, then each visible instrument far to near: a shaded cylinder
 /// (Lambert + specular stripe across the shaft, exact anti-aliased silhouette from the true
