@@ -11,16 +11,26 @@ namespace endo_guidance::core {
 
 namespace {
 
-// f x f means (f > 2): rows accumulated in 16 bits, then each block's sum rounded to nearest
+// f x f means (f > 2): rows accumulated in 16 bits, then each block's sum s rounded to nearest
 // (half up), in one pass (OpenCV's area resampling is slow for factors above 2: 5 ms for
-// 1920x1080 / 6 here). (2 s + d) / (2 d), d = f^2, in double: a non-integer quotient is at least
-// 1 / (2 d) >= 7.7e-6 below the next integer, so the 1e-6 added against the product's rounding
-// never carries.
-void boxMeans(cv::Mat const& src, int f, cv::Mat& dst) {
+// 1920x1080 / 6 here). The quotient comes from a table of the 255 f^2 + 1 possible sums for
+// f <= 32 (9 KB at f = 6); above, floor(n / q), n = 2 s + f^2 < 2^25, q = 2 f^2 < 2^17, as
+// (n M) >> 42 with M = ceil(2^42 / q): exact, since n (M q - 2^42) < n q < 2^42 (and n M < 2^63).
+// F > 0: the factor known at compile time (the block sums unrolled: 4x faster at 1920x1080 / 6).
+template <int F>
+void boxMeans(cv::Mat const& src, int factor, cv::Mat& dst) {
+  int const f = F > 0 ? F : factor;
   int const W = src.cols / f, H = src.rows / f, n = 3 * W * f;
   dst.create(H, W, CV_8UC3);
   std::vector<std::uint16_t> acc(static_cast<std::size_t>(n));
-  double const d = static_cast<double>(f) * f, rcp = 1.0 / (2.0 * d);
+  std::uint32_t const d = static_cast<std::uint32_t>(f * f);
+  std::uint64_t const M = ((std::uint64_t{1} << 42) + 2 * d - 1) / (2 * d);
+  auto mean = [&](std::uint32_t s) { return static_cast<std::uint8_t>((static_cast<std::uint64_t>(2 * s + d) * M) >> 42); };
+  std::vector<std::uint8_t> table;
+  if (f <= 32) {
+    table.resize(255 * d + 1);
+    for (std::uint32_t s = 0; s < table.size(); ++s) table[s] = mean(s);
+  }
   for (int y = 0; y < H; ++y) {
     std::fill(acc.begin(), acc.end(), 0);
     for (int r = 0; r < f; ++r) {
@@ -33,7 +43,7 @@ void boxMeans(cv::Mat const& src, int f, cv::Mat& dst) {
       for (int ch = 0; ch < 3; ++ch) {
         std::uint32_t sum = 0;
         for (int j = 0; j < f; ++j) sum += acc[static_cast<std::size_t>(3 * (x * f + j) + ch)];
-        out[3 * x + ch] = static_cast<std::uint8_t>((2.0 * sum + d) * rcp + 1e-6);
+        out[3 * x + ch] = table.empty() ? mean(sum) : table[sum];
       }
   }
 }
@@ -47,7 +57,12 @@ void reduceImage(cv::Mat const& src, int f, cv::Mat& dst) {
   // (A universal-intrinsics version measured 150-190 us against its 115-160 us at 640x480:
   // de-interleaving BGR without SSSE3 costs more than it saves.)
   else if (f == 2) cv::resize(src(cv::Rect(0, 0, src.cols / 2 * 2, src.rows / 2 * 2)), dst, cv::Size(src.cols / 2, src.rows / 2), 0, 0, cv::INTER_AREA);
-  else boxMeans(src, f, dst);
+  else if (f == 3) boxMeans<3>(src, f, dst);
+  else if (f == 4) boxMeans<4>(src, f, dst);
+  else if (f == 5) boxMeans<5>(src, f, dst);
+  else if (f == 6) boxMeans<6>(src, f, dst);  // 1920x1080 at the default processing width
+  else if (f == 8) boxMeans<8>(src, f, dst);
+  else boxMeans<0>(src, f, dst);
 }
 
 }  // namespace endo_guidance::core

@@ -56,12 +56,18 @@ TEST(ImageReduction, HalvingEqualsOpenCVAreaResamplingBitForBit) {
 
 TEST(ImageReduction, EveryFactorGivesTheRoundedBlockMeansAndDropsTheRemainder) {
   cv::Mat const src = randomImage(101, 47, 3);  // odd sizes: the last columns and rows are dropped
-  for (int f : {2, 3, 4, 6, 7}) {
+  for (int f : {2, 3, 4, 5, 6, 7, 8, 9}) {
     cv::Mat got;
     reduceImage(src, f, got);
     ASSERT_EQ(got.size(), cv::Size(101 / f, 47 / f)) << f;
     EXPECT_EQ(maxDiff(got, blockMeans(src, f)), 0) << f;
   }
+  // The largest factor: every block mean exact too.
+  cv::Mat const large = randomImage(512, 300, 5);
+  cv::Mat got255;
+  reduceImage(large, 255, got255);
+  ASSERT_EQ(got255.size(), cv::Size(2, 1));
+  EXPECT_EQ(maxDiff(got255, blockMeans(large, 255)), 0);
   cv::Mat same;
   reduceImage(src, 1, same);
   EXPECT_EQ(same.data, src.data);  // shared, not copied
