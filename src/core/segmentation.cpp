@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 #include <vector>
 
 #include "endo_guidance/core/image_reduction.h"
@@ -59,9 +60,19 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
 }
 }  // namespace
 
-InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params) : params_(params), colour_(params.feature) {}
+namespace {
+// What the stages index or divide by (the YAML loader refuses these with the key's name).
+SegmentationParams const& checked(SegmentationParams const& p) {
+  if (p.regions.thresholds.empty()) throw std::invalid_argument("segmentation: no growth thresholds");
+  if (p.processing_width <= 0) throw std::invalid_argument("segmentation: processing_width must be positive");
+  return p;
+}
+}  // namespace
+
+InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params) : params_(checked(params)), colour_(params.feature) {}
 
 void InstrumentSegmenter::setParams(SegmentationParams const& p) {
+  checked(p);
   bool const new_colour = p.feature.hue_origin_deg != params_.feature.hue_origin_deg || p.feature.gain != params_.feature.gain;
   params_ = p;
   if (new_colour) colour_ = ColourFeature(p.feature);

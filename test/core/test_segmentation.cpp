@@ -291,3 +291,15 @@ TEST(Segmentation, AWedgeWideningThreefoldIsNotAShaft) {
   InstrumentSegmenter unbounded(p);
   EXPECT_EQ(unbounded.process(wedge(20.0, 60.0)).contours.size(), 1u);
 }
+
+TEST(Segmentation, ParametersItCannotWorkWithAreRefused) {
+  SegmentationParams p;
+  p.regions.thresholds.clear();
+  EXPECT_THROW(InstrumentSegmenter{p}, std::invalid_argument);
+  InstrumentSegmenter seg;
+  EXPECT_THROW(seg.setParams(p), std::invalid_argument);
+  p = SegmentationParams{};
+  p.processing_width = 0;
+  EXPECT_THROW(seg.setParams(p), std::invalid_argument);
+  EXPECT_EQ(seg.params().processing_width, SegmentationParams{}.processing_width);  // unchanged
+}
