@@ -115,37 +115,32 @@ bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value =
 }
 
 // The chroma at a + i d, i = 0..count-1, bilinear, all inside the image (chromaAt() without the
-// bounds test and the brightness: the inner loop of the sub-pixel refinement).
+// bounds test and the brightness: the inner loop of the sub-pixel refinement). One sample per
+// SIMD step with the channels in the lanes: each corner is one 4-byte load (B, G, R and the next
+// pixel's B, unused), interpolated with the same operations, in the same order, as chromaAt(), so
+// the results are identical. A sample whose 4-byte load would pass the end of its row (the last
+// two columns) takes chromaAt().
 void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out) {
   std::size_t const stride = bgr.step[0];
   std::uint8_t const* const data = bgr.data;
-  // Four samples at a time: the pixel loads are scalar, the interpolation and the chroma run in
-  // 4-lane SIMD with the same operations, in the same order, as chromaAt() (the tail).
-  int i = 0;
-  alignas(16) float fxs[4], fys[4], q[4][3][4];  // q[corner][channel][lane]
-  for (; i + 4 <= count; i += 4) {
-    for (int l = 0; l < 4; ++l) {
-      double const x = a.x() + (i + l) * d.x(), y = a.y() + (i + l) * d.y();
-      int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-      fxs[l] = static_cast<float>(x - x0);
-      fys[l] = static_cast<float>(y - y0);
-      std::uint8_t const* p0 = data + y0 * stride + 3 * x0;
-      std::uint8_t const* p1 = p0 + stride;
-      for (int k = 0; k < 3; ++k) {
-        q[0][k][l] = p0[k];
-        q[1][k][l] = p0[k + 3];
-        q[2][k][l] = p1[k];
-        q[3][k][l] = p1[k + 3];
-      }
+  int const x_last = bgr.cols - 3;  // x0 + 1 + 1 must stay in the row
+  cv::v_float32x4 const one = cv::v_setall_f32(1.f);
+  auto corner = [](std::uint8_t const* q) { return cv::v_cvt_f32(cv::v_reinterpret_as_s32(cv::v_load_expand_q(q))); };
+  for (int i = 0; i < count; ++i) {
+    double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
+    int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+    if (x0 > x_last) {
+      chromaAt(bgr, x, y, &out[i]);
+      continue;
     }
-    cv::v_float32x4 const one = cv::v_setall_f32(1.f), fx = cv::v_load_aligned(fxs), fy = cv::v_load_aligned(fys);
-    cv::v_float32x4 c[3];
-    for (int k = 0; k < 3; ++k)
-      c[k] = (one - fy) * ((one - fx) * cv::v_load_aligned(q[0][k]) + fx * cv::v_load_aligned(q[1][k])) +
-             fy * ((one - fx) * cv::v_load_aligned(q[2][k]) + fx * cv::v_load_aligned(q[3][k]));
-    cv::v_store(out + i, cv::v_max(c[0], cv::v_max(c[1], c[2])) - cv::v_min(c[0], cv::v_min(c[1], c[2])));
+    cv::v_float32x4 const fx = cv::v_setall_f32(static_cast<float>(x - x0)), fy = cv::v_setall_f32(static_cast<float>(y - y0));
+    std::uint8_t const* p0 = data + y0 * stride + 3 * x0;
+    std::uint8_t const* p1 = p0 + stride;
+    cv::v_float32x4 const c = (one - fy) * ((one - fx) * corner(p0) + fx * corner(p0 + 3)) +
+                              fy * ((one - fx) * corner(p1) + fx * corner(p1 + 3));  // B, G, R, -
+    cv::v_float32x4 const c1 = cv::v_rotate_right<1>(c), c2 = cv::v_rotate_right<2>(c);  // G, R, ... and R, ...
+    out[i] = (cv::v_max(c, cv::v_max(c1, c2)) - cv::v_min(c, cv::v_min(c1, c2))).get0();
   }
-  for (; i < count; ++i) chromaAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), &out[i]);
 }
 
 // Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft

@@ -77,6 +77,39 @@ TEST(ContourLines, SubpixelEdgeOfAnAntiAliasedStep) {
   EXPECT_FALSE(refineLineSubpixel(flat, start, 5.0, 95.0, p));
 }
 
+// The profiles' fast chroma sampler (SIMD, channels in the lanes) and the scalar one (used
+// when the brightness fallback is on) are the same bilinear chroma: on random colours, across
+// an edge near the image's right end (its last two columns take the scalar path), both give the
+// same edge points. A lane mixed up (the 4th byte loaded is the next pixel's blue) or a wrong
+// weight moves them.
+TEST(ContourLines, FastChromaSamplerMatchesTheScalarOne) {
+  cv::Mat img(80, 120, CV_8UC3);
+  cv::randu(img, 0, 256);
+  // An edge at x = 112.4 - 0.05 y: random red-ish tissue left, random grey right.
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> n(-12, 12);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      double const cov = std::clamp(0.5 + (x - 112.4 + 0.05 * y), 0.0, 1.0);
+      int const g = 120 + n(rng);
+      cv::Vec3d const tissue(50 + n(rng), 70 + n(rng), 180 + n(rng)), grey(g + n(rng) / 4, g + n(rng) / 4, g + n(rng) / 4);
+      cv::Vec3d const c = tissue * (1 - cov) + grey * cov;
+      img.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]), cv::saturate_cast<uchar>(c[2]));
+    }
+  ImageLine const line = *normalizeLine(Eigen::Vector3d(1.0, 0.05, -112.0));
+  ContourLinesParams fast;
+  fast.min_edge_points = 20;
+  ContourLinesParams scalar = fast;
+  scalar.brightness_fallback_contrast = 1e9;  // the scalar sampler; the fallback itself never fires
+  for (ContourLinesParams* p : {&fast, &scalar}) p->refine_halfwidth_px = p->coarse_halfwidth_px = 6.0;  // to x = 118.x
+  auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
+  ASSERT_TRUE(a && b);
+  ASSERT_EQ(a->points, b->points);
+  ASSERT_EQ(a->inliers.size(), b->inliers.size());
+  for (std::size_t i = 0; i < a->inliers.size(); ++i) EXPECT_LT((a->inliers[i] - b->inliers[i]).norm(), 1e-6) << i;
+  EXPECT_LT((a->line - b->line).norm(), 1e-9);
+}
+
 TEST(ContourLines, RenderedShaftMatchesTruthAndBlobIsRejected) {
   SyntheticScene scene(defaultInstruments());
   RenderOptions ro;
