@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/segmentation.h"
@@ -233,4 +234,59 @@ TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
   strict.max_full_res_ratio_matte = strict.max_full_res_ratio;
   EXPECT_FALSE(stripContrastFullRes(mirror, c, strict));
   EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp), cv::Exception);
+}
+
+// The SIMD walk (four rays per step) gives every ray exactly the scalar walk's score and length:
+// rays of every angle from the border and from inside, on a gradient of random blobs and edges
+// in a circular field of view (rays that leave the image, the view, end on a weak edge, or run
+// the whole image), in batches of 1 to 9 (idle lanes at the end).
+TEST(StripSearch, SimdWalkEqualsTheScalarWalk) {
+  cv::Mat img(120, 160, CV_8UC3, cv::Scalar(0, 0, 0));
+  cv::circle(img, {80, 60}, 58, cv::Scalar(60, 80, 190), cv::FILLED);
+  FieldOfView const fov = detectFieldOfView(img);
+  ASSERT_TRUE(fov.valid());
+  cv::Mat feature(120, 160, CV_8U);
+  cv::RNG(7).fill(feature, cv::RNG::UNIFORM, 60, 140);  // (not the global RNG: other tests use it)
+  cv::GaussianBlur(feature, feature, cv::Size(7, 7), 2.0);
+  cv::rectangle(feature, {70, 0}, {84, 90}, cv::Scalar(10), cv::FILLED);  // a strip: long straight edges
+  // A strip whose edge has a 30 px gap: a walk stops in it (8 below its best), not beyond.
+  cv::rectangle(feature, {100, 0}, {114, 40}, cv::Scalar(10), cv::FILLED);
+  cv::rectangle(feature, {100, 70}, {114, 119}, cv::Scalar(10), cv::FILLED);
+  cv::Mat gx, gy;
+  cv::Sobel(feature, gx, CV_16S, 1, 0, 3);
+  cv::Sobel(feature, gy, CV_16S, 0, 1, 3);
+  StripSearchParams p;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  std::vector<StripRay> rays;
+  for (int i = 0; i < 400; ++i) {
+    StripRay r;
+    cv::Point const b = fov.border[static_cast<std::size_t>(rng() % fov.border.size())];
+    r.start = i % 5 == 0 ? Eigen::Vector2d(159.0 * U(rng), 119.0 * U(rng)) : Eigen::Vector2d(b.x, b.y);
+    bool const along = i % 20 < 2;  // down the left edge of a strip, tissue on the left
+    if (along) r.start = Eigen::Vector2d((i % 20 == 0 ? 69.0 : 99.0) + i % 3, 8.0);
+    double const a = along ? M_PI / 2 + 0.01 * (U(rng) - 0.5) : 2.0 * M_PI * U(rng);
+    r.dir = Eigen::Vector2d(std::cos(a), std::sin(a));
+    r.out = Eigen::Vector2d(-r.dir.y(), r.dir.x()) * (along || U(rng) < 0.5 ? 1.0 : -1.0);
+    rays.push_back(r);
+  }
+  std::vector<StripRay> scalar = rays;
+  for (auto& r : scalar) walkRay(r, gx, gy, fov, p);
+  int long_sides = 0, gap_ends = 0;
+  for (std::size_t i = 0; i < scalar.size(); ++i) {
+    long_sides += i % 20 == 0 && scalar[i].length >= 60.0;                           // the strip's edge followed
+    gap_ends += i % 20 == 1 && scalar[i].length >= 25.0 && scalar[i].length <= 35.0;  // ... and stopped in the gap
+  }
+  EXPECT_GT(long_sides, 10);
+  EXPECT_GT(gap_ends, 10);
+  for (std::size_t batch : {1u, 2u, 3u, 4u, 5u, 9u, 400u}) {
+    for (std::size_t i = 0; i < rays.size(); i += batch) {
+      std::vector<StripRay> part(rays.begin() + static_cast<long>(i), rays.begin() + static_cast<long>(std::min(rays.size(), i + batch)));
+      walkRays(part, gx, gy, fov, p);
+      for (std::size_t j = 0; j < part.size(); ++j) {
+        ASSERT_EQ(part[j].score, scalar[i + j].score) << "ray " << i + j << " batch " << batch;
+        ASSERT_EQ(part[j].length, scalar[i + j].length) << "ray " << i + j << " batch " << batch;
+      }
+    }
+  }
 }

@@ -37,6 +37,23 @@ struct StripSearchParams {
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
 };
 
+/// One side hypothesis of the strip search: a ray from a border point into the view.
+struct StripRay {
+  Eigen::Vector2d start, dir, out;  ///< start (processing px), unit direction, unit outward normal (toward the tissue)
+  double angle = 0.0;               ///< about the inward normal at the seed (rad)
+  double score = -1.0;              ///< best prefix of sum(min(g.out / full_response, 1) - min_response) (walkRay())
+  double length = 0.0;              ///< where that prefix ends (px)
+  int pos = 0;                      ///< its start: border points from the seed run's first one
+};
+/// Walks the ray in the gradient (gx, gy: CV_16S) one pixel at a time and keeps the best prefix:
+/// the side continues while the edge, on average, is at least min_response strong, and ends where
+/// it stops (jaws, tip, or the start of a leak), where it leaves the image or (after its first
+/// 4 px) the field of view, or 8 below its best. Sets score and length.
+void walkRay(StripRay& ray, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& params);
+/// walkRay() for every ray, four at a time in SIMD lanes: the same results, bit for bit.
+void walkRays(std::vector<StripRay>& rays, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov,
+              StripSearchParams const& params);
+
 /// The sides of a shaft searched directly in the edge image from a border seed -- the fallback
 /// when region growing from the seed leaks into tissue of the same colour (grey membranes, the
 /// vignetted rim, smoke), which breaks the boundary's two classes. Each side starts at an end of
