@@ -215,8 +215,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // The strip search (strip_search.h): the sides searched from the seed in the gradient.
     auto tryStrip = [&](StripCandidate const* previous) {
       if (!have_gradient) {
-        cv::Sobel(filtered_, gx_, CV_16S, 1, 0, 3);
-        cv::Sobel(filtered_, gy_, CV_16S, 0, 1, 3);
+        cv::spatialGradient(filtered_, gx_, gy_, 3);  // both 3x3 Sobel derivatives in one pass (as cv::Sobel, half the time)
         have_gradient = true;
       }
       auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -148,10 +149,12 @@ Eigen::Vector2d rotate(Eigen::Vector2d const& v, double a) {
 
 // The best rays of one side: starts at border points first+k_from..first+k_to (every k_step), a
 // coarse angular sweep over [a_lo, a_hi] about the inward normal, then the best few distinct
-// hypotheses (another start or another angle) refined to step / 3 and step / 12.
+// hypotheses (another start or another angle) refined to step / 3 and step / 12. `walked`: the
+// coarse sweeps already walked from each start (same side, same angles), reused and added to.
+using SweepCache = std::map<int, std::vector<StripRay>>;
 std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first, int k_from, int k_to, int k_step,
                             double a_lo, double a_hi, int candidates, Eigen::Vector2d const& inward, Eigen::Vector2d const& away, cv::Mat const& gx,
-                            cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
+                            cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p, SweepCache* walked = nullptr) {
   int const n = static_cast<int>(border.size());
   double const step = p.coarse_step_deg * M_PI / 180.0;
   auto make = [&](cv::Point const& s, double a, int pos) {  // (walked by walkRays())
@@ -165,11 +168,36 @@ std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first
     return r;
   };
   std::vector<StripRay> coarse;
+  struct Sweep {
+    int k;
+    std::size_t begin, end;  // in coarse
+  };
+  std::vector<Sweep> fresh;  // sweeps not walked before
   for (int k = k_from; k <= k_to; k += k_step) {
+    if (walked) {
+      if (auto const it = walked->find(k); it != walked->end()) {
+        coarse.insert(coarse.end(), it->second.begin(), it->second.end());
+        continue;
+      }
+    }
     cv::Point const s = border[((first + k) % n + n) % n];
+    std::size_t const begin = coarse.size();
     for (double a = a_lo; a <= a_hi + 1e-9; a += step) coarse.push_back(make(s, a, k));
+    fresh.push_back({k, begin, coarse.size()});
   }
-  walkRays(coarse, gx, gy, fov, p);
+  if (!walked) {
+    walkRays(coarse, gx, gy, fov, p);
+  } else if (!fresh.empty()) {
+    std::vector<StripRay> rays;
+    for (Sweep const& w : fresh) rays.insert(rays.end(), coarse.begin() + static_cast<long>(w.begin), coarse.begin() + static_cast<long>(w.end));
+    walkRays(rays, gx, gy, fov, p);
+    auto r = rays.begin();
+    for (Sweep const& w : fresh) {
+      std::copy(r, r + static_cast<long>(w.end - w.begin), coarse.begin() + static_cast<long>(w.begin));
+      (*walked)[w.k].assign(r, r + static_cast<long>(w.end - w.begin));
+      r += static_cast<long>(w.end - w.begin);
+    }
+  }
   std::sort(coarse.begin(), coarse.end(), [](StripRay const& a, StripRay const& b) { return a.score > b.score; });
   // The best few distinct hypotheses (another start or another angle).
   std::vector<StripRay> picked;
@@ -300,12 +328,14 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
   // previous frame, each side is searched only about where it was.
   int const len = seed.width;
   double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  // (the full searches' sweeps, per side: the extended search walks again only the new starts)
+  std::array<SweepCache, 2> walked;
   auto search = [&](std::array<int, 2> const& k_from, std::array<int, 2> const& k_to, int k_step,
-                    std::array<double, 2> const& a_lo, std::array<double, 2> const& a_hi, int candidates) {
-    std::vector<StripRay> const side0 =
-        searchSide(B, ib, k_from[0], k_to[0], k_step, a_lo[0], a_hi[0], candidates, inward, pb - pe, gx, gy, fov, p);
-    std::vector<StripRay> const side1 =
-        searchSide(B, ib, k_from[1], k_to[1], k_step, a_lo[1], a_hi[1], candidates, inward, pe - pb, gx, gy, fov, p);
+                    std::array<double, 2> const& a_lo, std::array<double, 2> const& a_hi, int candidates, bool full) {
+    std::vector<StripRay> const side0 = searchSide(B, ib, k_from[0], k_to[0], k_step, a_lo[0], a_hi[0], candidates, inward, pb - pe,
+                                                   gx, gy, fov, p, full ? &walked[0] : nullptr);
+    std::vector<StripRay> const side1 = searchSide(B, ib, k_from[1], k_to[1], k_step, a_lo[1], a_hi[1], candidates, inward, pe - pb,
+                                                   gx, gy, fov, p, full ? &walked[1] : nullptr);
     return pairSides(side0, side1, feature, fov, level, p, lp);
   };
   std::array<double, 2> const full_lo{-amax, -amax}, full_hi{amax, amax};
@@ -340,16 +370,16 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
         t_lo[s] = std::max(-amax, a - 2.0 * step);
         t_hi[s] = std::min(amax, a + 2.0 * step);
       }
-      pr = search(t_from, t_to, 1, t_lo, t_hi, 2);
+      pr = search(t_from, t_to, 1, t_lo, t_hi, 2, false);
     }
   }
   if (!tracked) {
     int const k_step = std::max(1, len / p.max_starts);
     pr = search({-p.start_slack_px, 0}, {len - 1, len - 1 + p.start_slack_px}, k_step, full_lo, full_hi,
-                p.candidates_per_side);
+                p.candidates_per_side, true);
     if (pr.score <= 0.0 && p.extend_px > p.start_slack_px) {
       int const ext = p.extend_px, k_step2 = std::max(1, (len + ext) / p.max_starts);
-      pr = search({-ext, 0}, {len - 1, len - 1 + ext}, k_step2, full_lo, full_hi, p.candidates_per_side);
+      pr = search({-ext, 0}, {len - 1, len - 1 + ext}, k_step2, full_lo, full_hi, p.candidates_per_side, true);
     }
   }
   if (pr.score <= 0.0) return std::nullopt;

@@ -25,7 +25,7 @@ struct SegmentationParams {
   int fov_refresh = 25;           ///< frames between field-of-view detections (it rarely changes)
   int level_memory_px = 8;        ///< processing px: a seed this close to last frame's entry reuses its level
   int full_search_every = 5;      ///< frames: a rejected seed is searched in full again this often, but
-  int strip_search_max_every = 15; ///< its strip search (the costliest step) less and less often: the
+  int strip_search_max_every = 30; ///< its strip search (the costliest step) less and less often: the
                                    ///< interval doubles, up to this, while the strip search keeps failing
   ColourFeatureParams feature;
   FieldOfViewParams fov;
