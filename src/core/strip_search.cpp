@@ -198,10 +198,14 @@ std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first
       r += static_cast<long>(w.end - w.begin);
     }
   }
-  std::sort(coarse.begin(), coarse.end(), [](StripRay const& a, StripRay const& b) { return a.score > b.score; });
+  // By score, best first (keys sorted, not the rays: the same permutation, a fifth of the moves).
+  std::vector<std::pair<double, std::uint32_t>> order(coarse.size());
+  for (std::size_t i = 0; i < coarse.size(); ++i) order[i] = {coarse[i].score, static_cast<std::uint32_t>(i)};
+  std::sort(order.begin(), order.end(), [](auto const& a, auto const& b) { return a.first > b.first; });
   // The best few distinct hypotheses (another start or another angle).
   std::vector<StripRay> picked;
-  for (auto const& r : coarse) {
+  for (auto const& [score, i] : order) {
+    StripRay const& r = coarse[i];
     if (static_cast<int>(picked.size()) >= candidates || r.score <= 0.0) break;
     bool distinct = true;
     for (auto const& q : picked)
