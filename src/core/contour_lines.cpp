@@ -298,15 +298,14 @@ std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pt
   Eigen::Vector2d const n = line.head<2>();
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
   // Robust LS: Tukey biweight, scale from the MAD, three passes.
-  std::vector<double> w(pts.size(), 1.0);
+  std::vector<double> w(pts.size(), 1.0), r(pts.size()), rr(pts.size());
   Eigen::Vector3d l = line;
   for (int it = 0; it < 3; ++it) {
     auto const f = fitLineLS(pts, &w);
     if (!f) return std::nullopt;
     l = *f;
-    std::vector<double> r(pts.size());
     for (std::size_t i = 0; i < pts.size(); ++i) r[i] = std::abs(l.head<2>().dot(pts[i]) + l.z());
-    std::vector<double> rr = r;
+    std::copy(r.begin(), r.end(), rr.begin());
     std::nth_element(rr.begin(), rr.begin() + rr.size() / 2, rr.end());
     double const sc = std::max(1.4826 * rr[rr.size() / 2], 0.05);
     for (std::size_t i = 0; i < pts.size(); ++i) {
