@@ -12,7 +12,15 @@
 
 namespace endo_guidance::core {
 
+namespace {
+void checkGradient(cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov) {
+  CV_Assert(gx.type() == CV_16S && gy.type() == CV_16S && gx.size() == gy.size() && fov.mask.type() == CV_8U &&
+            fov.mask.size() == gx.size());
+}
+}  // namespace
+
 void walkRay(StripRay& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
+  checkGradient(gx, gy, fov);
   float const ox = static_cast<float>(r.out.x() / p.full_response), oy = static_cast<float>(r.out.y() / p.full_response);
   float const dx = static_cast<float>(r.dir.x()), dy = static_cast<float>(r.dir.y()), tau = static_cast<float>(p.min_response);
   float x = static_cast<float>(r.start.x()) + 0.5f, y = static_cast<float>(r.start.y()) + 0.5f;  // +0.5: truncation rounds
@@ -43,6 +51,7 @@ void walkRay(StripRay& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView cons
 // one. Each ray gets exactly walkRay()'s result (the same float operations in the same order);
 // the four independent sums run side by side instead of one after another (2x faster).
 void walkRays(std::vector<StripRay>& rays, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& p) {
+  checkGradient(gx, gy, fov);
   constexpr int L = 4;
   int const n = static_cast<int>(rays.size());
   int const tmax = gx.cols + gx.rows;

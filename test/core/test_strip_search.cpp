@@ -159,6 +159,20 @@ TEST(StripSearch, BadInput) {
   FieldOfView empty = d.fov;
   empty.border.clear();
   EXPECT_FALSE(searchStrip(d.feature, d.gx, d.gy, empty, d.seeds[0], 60, 1, {}, {}));
+  // The walks index the gradient and the view's mask with the same coordinates: a float
+  // gradient or a mask of another size is refused, not read out of bounds.
+  std::vector<StripRay> rays(3);
+  for (auto& r : rays) {
+    r.start = Eigen::Vector2d(5, 5);
+    r.dir = Eigen::Vector2d(1, 0);
+    r.out = Eigen::Vector2d(0, 1);
+  }
+  EXPECT_THROW(walkRays(rays, gxf, d.gy, d.fov, {}), cv::Exception);
+  EXPECT_THROW(walkRay(rays[0], gxf, d.gy, d.fov, {}), cv::Exception);
+  FieldOfView half = d.fov;
+  half.mask = d.fov.mask(cv::Rect(0, 0, 160, 120)).clone();
+  EXPECT_THROW(walkRays(rays, d.gx, d.gy, half, {}), cv::Exception);
+  EXPECT_NO_THROW(walkRays(rays, d.gx, d.gy, d.fov, {}));
 }
 
 // In the segmentation: a grey shaft whose grown region runs into a grey membrane lying along the
