@@ -271,13 +271,35 @@ class EdgeProfiler {
 };
 
 // The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
-// min_edge_contrast, every refine_step_px from t0 to t1.
+// min_edge_contrast, at t = t0 + j refine_step_px up to t1. `reuse`: profiles of the same line
+// with the same parameters at t0 + i step (step a multiple of refine_step_px), taken as they are;
+// `record`: where to keep every profile's edge.
 std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
-                                               ContourLinesParams const& p) {
+                                               ContourLinesParams const& p, ProfileEdges const* reuse = nullptr,
+                                               ProfileEdges* record = nullptr) {
   EdgeProfiler profiler(bgr, p);
   std::vector<Eigen::Vector2d> pts;
-  for (double t = t0; t <= t1; t += p.refine_step_px)
-    if (auto const q = profiler.at(line, t)) pts.push_back(*q);
+  double const step = p.refine_step_px;
+  // Every m-th profile is one of `reuse`'s: the same t exactly (integer multiples of the steps).
+  int m = 0;
+  if (reuse && reuse->t0 == t0 && step > 0.0 && reuse->step >= step) {
+    double const r = reuse->step / step;
+    if (r == std::round(r)) m = static_cast<int>(r);
+  }
+  if (record) {
+    record->t0 = t0;
+    record->step = step;
+    record->edges.clear();
+  }
+  for (int j = 0;; ++j) {
+    double const t = t0 + j * step;  // (not accumulated: the reused profiles' t are the same)
+    if (!(t <= t1)) break;
+    std::optional<Eigen::Vector2d> q;
+    if (m > 0 && j % m == 0 && static_cast<std::size_t>(j / m) < reuse->edges.size()) q = reuse->edges[static_cast<std::size_t>(j / m)];
+    else q = profiler.at(line, t);
+    if (record) record->edges.push_back(q);
+    if (q) pts.push_back(*q);
+  }
   return pts;
 }
 
@@ -323,6 +345,14 @@ std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, ImageLine cons
                                               ContourLinesParams const& p) {
   return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p), line, p);
 }
+
+namespace {
+// refineLineSubpixel() reusing or recording profiles (subpixelEdgePoints()).
+std::optional<RefinedLine> refineLineProfiles(cv::Mat const& bgr, ImageLine const& line, double t0, double t1, ContourLinesParams const& p,
+                                              ProfileEdges const* reuse, ProfileEdges* record) {
+  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p, reuse, record), line, p);
+}
+}  // namespace
 
 std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
                                               double t_lo, double t_hi, ContourLinesParams const& p) {
@@ -671,7 +701,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     ContourLinesParams wide = widePass(p);
     // (every profile: sparser recentring cost 5 points of in-vivo recall)
     wide.max_residual_px = 1e9;
-    auto const r0 = refineLineSubpixel(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide);
+    auto const r0 = refineLineProfiles(bgr, coarse[s], t0 + 2.0, t1 - 2.0, wide, &sides.scored[s], nullptr);
     if (!r0) return reject(ContourRejection::kWeakEdges);
     auto r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p);
     if (!r) return reject(ContourRejection::kWeakEdges);
@@ -799,7 +829,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   return fit;
 }
 
-double scoreSides(SideFit const& sides, cv::Mat const& bgr, ContourLinesParams const& p) {
+double scoreSides(SideFit& sides, cv::Mat const& bgr, ContourLinesParams const& p) {
   if (sides.rejection != ContourRejection::kNone) return -1.0;
   ContourLinesParams wide = widePass(p);
   wide.refine_step_px = p.score_step_px;
@@ -812,7 +842,7 @@ double scoreSides(SideFit const& sides, cv::Mat const& bgr, ContourLinesParams c
       t0 = std::min(t0, d.dot(q));
       t1 = std::max(t1, d.dot(q));
     }
-    auto const r = refineLineSubpixel(bgr, sides.lines[s], t0 + 2.0, t1 - 2.0, wide);
+    auto const r = refineLineProfiles(bgr, sides.lines[s], t0 + 2.0, t1 - 2.0, wide, nullptr, &sides.scored[s]);
     if (!r) return -1.0;
     score += r->points / (1.0 + r->residual_px);
   }

@@ -110,6 +110,43 @@ TEST(ContourLines, FastChromaSamplerMatchesTheScalarOne) {
   EXPECT_LT((a->line - b->line).norm(), 1e-9);
 }
 
+// refineContour()'s wide pass reuses the profiles scoreSides() took (every third of its own):
+// the contour is the same, bit for bit, as without them; and they are used (moved, they move it).
+TEST(ContourLines, ScoredProfilesAreReusedExactly) {
+  SyntheticScene scene(defaultInstruments());
+  SceneRenderer renderer(640, 480, RenderOptions{});
+  cv::Mat const img = renderer.render(scene.frame(60), 60);
+  InstrumentSegmenter seg;
+  SegmentationResult const res = seg.process(img);
+  int checked = 0;
+  for (std::size_t i = 0; i < res.regions.size(); ++i) {
+    if (res.region_status[i] != ContourRejection::kNone) continue;
+    ContourLinesParams const p;
+    SideFit const fit = fitSides(res.regions[i], seg.fieldOfView(), res.scale, p);
+    if (fit.rejection != ContourRejection::kNone) continue;
+    SideFit scored = fit;
+    ASSERT_GT(scoreSides(scored, img, p), 0.0);
+    for (auto const& pe : scored.scored) {
+      EXPECT_EQ(pe.step, p.score_step_px);
+      EXPECT_GT(pe.edges.size(), 10u);
+    }
+    ContourFit const a = refineContour(scored, res.regions[i], seg.fieldOfView(), img, res.scale, p);
+    ContourFit const b = refineContour(fit, res.regions[i], seg.fieldOfView(), img, res.scale, p);
+    ASSERT_TRUE(a.contour && b.contour);
+    for (int k = 0; k < 2; ++k) EXPECT_EQ(a.contour->lines[k], b.contour->lines[k]) << "region " << i << " line " << k;
+    EXPECT_EQ(a.edge_points, b.edge_points);
+    // Moved 3 px, the reused edges pull the wide pass's line: the result changes.
+    SideFit moved = scored;
+    for (auto& pe : moved.scored)
+      for (auto& q : pe.edges)
+        if (q) *q += Eigen::Vector2d(3.0, 3.0);
+    ContourFit const c = refineContour(moved, res.regions[i], seg.fieldOfView(), img, res.scale, p);
+    EXPECT_TRUE(!c.contour || c.contour->lines[0] != a.contour->lines[0] || c.contour->lines[1] != a.contour->lines[1]);
+    ++checked;
+  }
+  EXPECT_GE(checked, 2);
+}
+
 TEST(ContourLines, RenderedShaftMatchesTruthAndBlobIsRejected) {
   SyntheticScene scene(defaultInstruments());
   RenderOptions ro;

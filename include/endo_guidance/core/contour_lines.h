@@ -135,6 +135,11 @@ ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::
 
 /// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
 /// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
+/// The edges found on the profiles at t0 + j step along a line (nullopt: no edge on that profile).
+struct ProfileEdges {
+  double t0 = 0.0, step = 0.0;
+  std::vector<std::optional<Eigen::Vector2d>> edges;
+};
 struct SideFit {
   std::array<Eigen::Vector3d, 2> lines{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   std::array<std::vector<Eigen::Vector2d>, 2> points;
@@ -143,13 +148,16 @@ struct SideFit {
   bool merged = false;  ///< the region meets the FOV border more than once (instruments merged)
   bool parallel = false;  ///< a side was not straight from the entry and was found as the stretch parallel to the other
   ContourRejection rejection = ContourRejection::kNone;
+  /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
+  /// same profiles, denser) reuses.
+  std::array<ProfileEdges, 2> scored;
 };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
 /// Sets fit.far to the side point farthest from fit.entry.
 void setFarEnd(SideFit& fit);
 /// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge
 /// pass per side; (edge points) / (1 + RMS residual), or -1 when a side has no edge.
-double scoreSides(SideFit const& sides, cv::Mat const& bgr_full, ContourLinesParams const& params);
+double scoreSides(SideFit& sides, cv::Mat const& bgr_full, ContourLinesParams const& params);
 /// The second half: sub-pixel lines, order, tip and the length/width checks.
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full,
                          int scale, ContourLinesParams const& params);
