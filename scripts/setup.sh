@@ -19,7 +19,7 @@ PKGS=(
   librosbag-dev python3-rosbag python3-rostopic python3-sensor-msgs rosbash ros-core
   libopencv-dev libeigen3-dev libvisp-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev librostest-dev python3-rostest
-  rviz xvfb xauth imagemagick image-transport-tools python3-matplotlib
+  rviz xvfb xauth imagemagick image-transport-tools python3-matplotlib python3-opencv
 )
 
 missing=()
