@@ -155,10 +155,8 @@ std::optional<double> steepestDescent(std::vector<float> const& prof, double ds,
   float bg = -static_cast<float>(min_slope);
   for (int i = 1; i + 1 < ns; ++i) {
     float const g = prof[i + 1] - prof[i - 1];
-    if (g < bg) {
-      bg = g;
-      bi = i;
-    }
+    bi = g < bg ? i : bi;  // (branch-free: where the minimum falls is not predictable)
+    bg = std::min(bg, g);
   }
   int const wr = static_cast<int>(std::lround(2.5 / ds));
   if (bi < 0 || bi - wr < 1 || bi + wr > ns - 2) return std::nullopt;
@@ -271,9 +269,9 @@ class EdgeProfiler {
 };
 
 // The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
-// min_edge_contrast, at t = t0 + j refine_step_px up to t1. `reuse`: profiles of the same line
-// with the same parameters at t0 + i step (step a multiple of refine_step_px), taken as they are;
-// `record`: where to keep every profile's edge.
+// min_edge_contrast, at t = t0 + j refine_step_px up to t1. `reuse`: profiles taken with the same
+// parameters at t0 + i step (step a multiple of refine_step_px), used where the line and t0 are
+// exactly the same; `record`: where to keep every profile's edge.
 std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine const& line, double t0, double t1,
                                                ContourLinesParams const& p, ProfileEdges const* reuse = nullptr,
                                                ProfileEdges* record = nullptr) {
@@ -282,11 +280,12 @@ std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, ImageLine co
   double const step = p.refine_step_px;
   // Every m-th profile is one of `reuse`'s: the same t exactly (integer multiples of the steps).
   int m = 0;
-  if (reuse && reuse->t0 == t0 && step > 0.0 && reuse->step >= step) {
+  if (reuse && reuse->line == line && reuse->t0 == t0 && step > 0.0 && reuse->step >= step) {
     double const r = reuse->step / step;
     if (r == std::round(r)) m = static_cast<int>(r);
   }
   if (record) {
+    record->line = line;
     record->t0 = t0;
     record->step = step;
     record->edges.clear();

@@ -142,6 +142,15 @@ TEST(ContourLines, ScoredProfilesAreReusedExactly) {
         if (q) *q += Eigen::Vector2d(3.0, 3.0);
     ContourFit const c = refineContour(moved, res.regions[i], seg.fieldOfView(), img, res.scale, p);
     EXPECT_TRUE(!c.contour || c.contour->lines[0] != a.contour->lines[0] || c.contour->lines[1] != a.contour->lines[1]);
+    // A side whose line changed after the scoring takes none of them: as if never scored.
+    SideFit changed = scored, changed_fresh = fit;
+    for (SideFit* f : {&changed, &changed_fresh}) f->lines[0].z() += 0.5;
+    ContourFit const d = refineContour(changed, res.regions[i], seg.fieldOfView(), img, res.scale, p);
+    ContourFit const e = refineContour(changed_fresh, res.regions[i], seg.fieldOfView(), img, res.scale, p);
+    ASSERT_EQ(d.contour.has_value(), e.contour.has_value());
+    if (d.contour) {
+      for (int k = 0; k < 2; ++k) EXPECT_EQ(d.contour->lines[k], e.contour->lines[k]);
+    }
     ++checked;
   }
   EXPECT_GE(checked, 2);

@@ -133,13 +133,15 @@ struct ContourFit {
 ContourFit fitApparentContour(Region const& region, FieldOfView const& fov, cv::Mat const& bgr_full, int scale,
                               ContourLinesParams const& params);
 
-/// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
-/// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
-/// The edges found on the profiles at t0 + j step along a line (nullopt: no edge on that profile).
+/// The edges found on the profiles across `line` at t0 + j step along it (nullopt: no edge on
+/// that profile), with the parameters of widePass().
 struct ProfileEdges {
+  ImageLine line = ImageLine::Zero();
   double t0 = 0.0, step = 0.0;
   std::vector<std::optional<Eigen::Vector2d>> edges;
 };
+/// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
+/// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
 struct SideFit {
   std::array<Eigen::Vector3d, 2> lines{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   std::array<std::vector<Eigen::Vector2d>, 2> points;
@@ -149,7 +151,7 @@ struct SideFit {
   bool parallel = false;  ///< a side was not straight from the entry and was found as the stretch parallel to the other
   ContourRejection rejection = ContourRejection::kNone;
   /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
-  /// same profiles, denser) reuses.
+  /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
 };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
