@@ -77,7 +77,7 @@ TEST(ContourLines, SubpixelEdgeOfAnAntiAliasedStep) {
   EXPECT_FALSE(refineLineSubpixel(flat, start, 5.0, 95.0, p));
 }
 
-// The profiles' fast chroma sampler (SIMD, channels in the lanes) and the scalar one (used
+// The profiles' fast chroma samplers (SIMD, channels in the lanes) and the scalar one (used
 // when the brightness fallback is on) are the same bilinear chroma: on random colours, across
 // an edge near the image's right end (its last two columns take the scalar path), both give the
 // same edge points. A lane mixed up (the 4th byte loaded is the next pixel's blue) or a wrong
@@ -102,12 +102,18 @@ TEST(ContourLines, FastChromaSamplerMatchesTheScalarOne) {
   ContourLinesParams scalar = fast;
   scalar.brightness_fallback_contrast = 1e9;  // the scalar sampler; the fallback itself never fires
   for (ContourLinesParams* p : {&fast, &scalar}) p->refine_halfwidth_px = p->coarse_halfwidth_px = 6.0;  // to x = 118.x
-  auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
-  ASSERT_TRUE(a && b);
-  ASSERT_EQ(a->points, b->points);
-  ASSERT_EQ(a->inliers.size(), b->inliers.size());
-  for (std::size_t i = 0; i < a->inliers.size(); ++i) EXPECT_LT((a->inliers[i] - b->inliers[i]).norm(), 1e-6) << i;
-  EXPECT_LT((a->line - b->line).norm(), 1e-9);
+  // Both fast samplers: two samples per step where the CPU has AVX2, one (SSE2) without it or
+  // with OpenCV's optimisations off.
+  for (bool optimised : {true, false}) {
+    cv::setUseOptimized(optimised);
+    auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
+    ASSERT_TRUE(a && b);
+    ASSERT_EQ(a->points, b->points);
+    ASSERT_EQ(a->inliers.size(), b->inliers.size());
+    for (std::size_t i = 0; i < a->inliers.size(); ++i) EXPECT_LT((a->inliers[i] - b->inliers[i]).norm(), 1e-6) << i << " optimised " << optimised;
+    EXPECT_LT((a->line - b->line).norm(), 1e-9) << "optimised " << optimised;
+  }
+  cv::setUseOptimized(true);
 }
 
 // refineContour()'s wide pass reuses the profiles scoreSides() took (every third of its own):
