@@ -177,36 +177,18 @@ std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first
     r.pos = pos;
     return r;
   };
+  // The coarse sweep from each start, walked once per search (`walked`: across its passes).
+  SweepCache local;
+  SweepCache& sweeps = walked ? *walked : local;
   std::vector<StripRay> coarse;
-  struct Sweep {
-    int k;
-    std::size_t begin, end;  // in coarse
-  };
-  std::vector<Sweep> fresh;  // sweeps not walked before
   for (int k = k_from; k <= k_to; k += k_step) {
-    if (walked) {
-      if (auto const it = walked->find(k); it != walked->end()) {
-        coarse.insert(coarse.end(), it->second.begin(), it->second.end());
-        continue;
-      }
+    auto const [it, fresh] = sweeps.try_emplace(k);
+    if (fresh) {
+      cv::Point const s = border[((first + k) % n + n) % n];
+      for (double a = a_lo; a <= a_hi + 1e-9; a += step) it->second.push_back(make(s, a, k));
+      walkRays(it->second, gx, gy, fov, p);
     }
-    cv::Point const s = border[((first + k) % n + n) % n];
-    std::size_t const begin = coarse.size();
-    for (double a = a_lo; a <= a_hi + 1e-9; a += step) coarse.push_back(make(s, a, k));
-    fresh.push_back({k, begin, coarse.size()});
-  }
-  if (!walked) {
-    walkRays(coarse, gx, gy, fov, p);
-  } else if (!fresh.empty()) {
-    std::vector<StripRay> rays;
-    for (Sweep const& w : fresh) rays.insert(rays.end(), coarse.begin() + static_cast<long>(w.begin), coarse.begin() + static_cast<long>(w.end));
-    walkRays(rays, gx, gy, fov, p);
-    auto r = rays.begin();
-    for (Sweep const& w : fresh) {
-      std::copy(r, r + static_cast<long>(w.end - w.begin), coarse.begin() + static_cast<long>(w.begin));
-      (*walked)[w.k].assign(r, r + static_cast<long>(w.end - w.begin));
-      r += static_cast<long>(w.end - w.begin);
-    }
+    coarse.insert(coarse.end(), it->second.begin(), it->second.end());
   }
   // By score, best first (keys sorted, not the rays: the same permutation, a fifth of the moves).
   std::vector<std::pair<double, std::uint32_t>> order(coarse.size());
