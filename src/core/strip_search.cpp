@@ -204,9 +204,19 @@ std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first
       distinct = distinct && (std::abs(q.angle - r.angle) > 1.5 * step || std::abs(q.pos - r.pos) > 2 * k_step);
     if (distinct) picked.push_back(r);
   }
-  // (each stage's rays of every hypothesis walked together; the first best in order is kept)
+  // Each refinement stage: the rays of every hypothesis walked together, then the first best in
+  // order kept (a hypothesis's rays are rays[first_ray[i], first_ray[i + 1])).
   std::vector<StripRay> rays;
   std::vector<std::size_t> first_ray;
+  auto keepBest = [&]() {
+    first_ray.push_back(rays.size());
+    walkRays(rays, gx, gy, fov, p);
+    for (std::size_t i = 0; i < picked.size(); ++i)
+      for (std::size_t j = first_ray[i]; j < first_ray[i + 1]; ++j)
+        if (rays[j].score > picked[i].score) picked[i] = rays[j];
+    rays.clear();
+    first_ray.clear();
+  };
   for (auto const& r : picked) {
     first_ray.push_back(rays.size());
     for (int k = r.pos - k_step / 2; k <= r.pos + k_step / 2; ++k) {
@@ -214,24 +224,14 @@ std::vector<StripRay> searchSide(std::vector<cv::Point> const& border, int first
       for (double a = r.angle - step; a <= r.angle + step + 1e-9; a += step / 3.0) rays.push_back(make(s, a, k));
     }
   }
-  first_ray.push_back(rays.size());
-  walkRays(rays, gx, gy, fov, p);
-  for (std::size_t i = 0; i < picked.size(); ++i)
-    for (std::size_t j = first_ray[i]; j < first_ray[i + 1]; ++j)
-      if (rays[j].score > picked[i].score) picked[i] = rays[j];
+  keepBest();
   // Then finer, at the best start (a long side needs a fraction of a degree).
-  rays.clear();
-  first_ray.clear();
   for (auto const& best : picked) {
     first_ray.push_back(rays.size());
     cv::Point const s = border[((first + best.pos) % n + n) % n];
     for (double a = best.angle - step / 3.0; a <= best.angle + step / 3.0 + 1e-9; a += step / 12.0) rays.push_back(make(s, a, best.pos));
   }
-  first_ray.push_back(rays.size());
-  walkRays(rays, gx, gy, fov, p);
-  for (std::size_t i = 0; i < picked.size(); ++i)
-    for (std::size_t j = first_ray[i]; j < first_ray[i + 1]; ++j)
-      if (rays[j].score > picked[i].score) picked[i] = rays[j];
+  keepBest();
   return picked;
 }
 
