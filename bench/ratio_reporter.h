@@ -27,6 +27,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
       units_.push_back(benchmark::GetTimeUnitString(r.time_unit));
       auto const it = r.counters.find("ratio");
       paired_.push_back(it != r.counters.end() ? static_cast<double>(it->second) : -1.0);
+      aggregate_.push_back(r.run_type == Run::RT_Aggregate);
     }
   }
   void Finalize() override {
@@ -35,7 +36,8 @@ class RatioReporter : public benchmark::ConsoleReporter {
     for (std::size_t i = 0; i < times_.size(); ++i) {
       auto const& [n, t] = times_[i];
       if (paired_[i] >= 0.0) {  // measured against the reference within its own iterations
-        std::printf("  %-45s %9.4f   (paired, each iteration)\n", n.c_str(), paired_[i]);
+        std::printf("  %-45s %9.4f   (%s)\n", n.c_str(), paired_[i],
+                    aggregate_[i] ? "over the repetitions' ratios" : "paired, each iteration");
         continue;
       }
       std::string const ref = reference_of_(n);
@@ -50,6 +52,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
   std::vector<std::pair<std::string, double>> times_;
   std::vector<char const*> units_;
   std::vector<double> paired_;  ///< a benchmark's own "ratio" counter, -1 if none
+  std::vector<bool> aggregate_;  ///< the run is an aggregate of repetitions (median, mean, stddev, cv)
 };
 
 /// main() of the benchmark programs: single thread, the reporter above.
