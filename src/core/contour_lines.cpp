@@ -421,18 +421,35 @@ std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine co
   for (int dir : {1, -1}) {
     double t = dir > 0 ? t1 : t0;
     int misses = 0, added = 0;
+    // After a gap of more than a few profiles (an instrument or a blob across the edge), the
+    // edge found again is kept only once it holds over kConfirm profiles in a row: a lone edge
+    // point on the line beyond a gap is as likely another edge (tissue, the jaws) as this one.
+    int const kFreeGap = 3, kConfirm = 4;
+    std::vector<Eigen::Vector2d> pending;
+    bool after_gap = false;
     while (true) {
       t += dir * p.refine_step_px;
       if (dir > 0 ? t > t_hi : t < t_lo) break;
       auto const q = profiler.at(l, t);
       if (q && std::abs(l.head<2>().dot(*q) + l.z()) <= gate) {
-        pts.push_back(*q);
+        if (misses > kFreeGap) after_gap = true;
         misses = 0;
-        // Follow the line as it gets longer (its direction improves with the baseline).
-        if (++added % 16 == 0)
-          if (auto const f = robustEdgeLine(pts, l, p)) l = f->line;
-      } else if (++misses >= p.extend_max_misses) {
-        break;
+        pending.push_back(*q);
+        if (after_gap && static_cast<int>(pending.size()) < kConfirm) continue;
+        after_gap = false;
+        for (auto const& e : pending) {
+          pts.push_back(e);
+          // Follow the line as it gets longer (its direction improves with the baseline).
+          if (++added % 16 == 0)
+            if (auto const f = robustEdgeLine(pts, l, p)) l = f->line;
+        }
+        pending.clear();
+      } else {
+        if (after_gap) {  // not confirmed: the gap goes on
+          misses += static_cast<int>(pending.size());
+          pending.clear();
+        }
+        if (++misses >= p.extend_max_misses) break;
       }
     }
   }
@@ -527,6 +544,68 @@ std::optional<FollowedSide> followSide(std::vector<Eigen::Vector2d> const& chain
   return f;
 }
 
+// The extent [lo, hi] of points along direction d.
+std::pair<double, double> extentAlong(Eigen::Vector2d const& d, std::vector<Eigen::Vector2d> const& v) {
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (auto const& q : v) {
+    lo = std::min(lo, d.dot(q));
+    hi = std::max(hi, d.dot(q));
+  }
+  return {lo, hi};
+}
+
+// The straight run of a boundary sequence: the line through a random pair of its points (not
+// `used`; with `along`, within the angle whose cosine is cos_max of that direction) with the most
+// points within 1 px, and the longest run of points on it along the sequence (gaps of
+// max_gap_points allowed). nullopt: fewer than min_side_points on the best line.
+struct StraightRun {
+  Eigen::Vector3d line = Eigen::Vector3d::Zero();
+  int begin = -1, end = -1;  ///< sequence indices of the run's first and last point
+  std::vector<Eigen::Vector2d> points;  ///< the run's points on the line
+};
+std::optional<StraightRun> straightRun(std::vector<Eigen::Vector2d> const& seq, std::vector<unsigned char> const* used, int samples,
+                                       std::mt19937_64& rng, ContourLinesParams const& p, Eigen::Vector2d const* along = nullptr,
+                                       double cos_max = 0.0) {
+  int const n = static_cast<int>(seq.size());
+  if (n < 2) return std::nullopt;
+  auto const free = [&](int i) { return !used || !(*used)[static_cast<std::size_t>(i)]; };
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  Eigen::Vector3d best = Eigen::Vector3d::Zero();
+  int best_count = 0;
+  for (int s = 0; s < samples; ++s) {
+    int const i = pick(rng), j = pick(rng);
+    if (!free(i) || !free(j)) continue;
+    Eigen::Vector2d const d = seq[j] - seq[i];
+    double const len = d.norm();
+    if (len < 4.0 || (along && std::abs(along->dot(d / len)) < cos_max)) continue;
+    Eigen::Vector2d const nrm(-d.y() / len, d.x() / len);
+    double const c = -nrm.dot(seq[i]);
+    int count = 0;
+    for (int q = 0; q < n; ++q) count += free(q) && std::abs(nrm.dot(seq[q]) + c) <= 1.0;
+    if (count > best_count) {
+      best_count = count;
+      best = Eigen::Vector3d(nrm.x(), nrm.y(), c);
+    }
+  }
+  if (best_count < p.min_side_points) return std::nullopt;
+  StraightRun run;
+  run.line = best;
+  int cur_start = -1, last = -1, best_len = 0;
+  for (int i = 0; i < n; ++i) {
+    if (!free(i) || std::abs(best.head<2>().dot(seq[i]) + best.z()) > 1.0) continue;
+    if (cur_start < 0 || i - last > p.max_gap_points + 1) cur_start = i;
+    last = i;
+    if (i - cur_start + 1 > best_len) {
+      best_len = i - cur_start + 1;
+      run.begin = cur_start;
+      run.end = i;
+    }
+  }
+  for (int i = run.begin; i >= 0 && i <= run.end; ++i)
+    if (free(i) && std::abs(best.head<2>().dot(seq[i]) + best.z()) <= 1.0) run.points.push_back(seq[i]);
+  return run;
+}
+
 // The side of a region whose boundary, from the entry, is not a straight line (a grey blob
 // merged with the shaft near the entry: gauze): the straight stretch of `head` (the boundary
 // from the entry to the point farthest from the seed), beside the other side (within its extent
@@ -538,67 +617,91 @@ std::optional<FollowedSide> parallelSide(std::vector<Eigen::Vector2d> const& hea
   Eigen::Vector3d const& other = other_side.line;
   double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
   Eigen::Vector2d const od(-other.y(), other.x());
-  auto extent = [&](std::vector<Eigen::Vector2d> const& v) {
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (auto const& q : v) {
-      lo = std::min(lo, od.dot(q));
-      hi = std::max(hi, od.dot(q));
-    }
-    return std::make_pair(lo, hi);
-  };
-  auto const [a0, a1] = extent(other_side.points);
+  auto const [a0, a1] = extentAlong(od, other_side.points);
   // Only the stretch beside the other side: where the region also holds a touching instrument
   // beyond the tip, that instrument's edges (near-parallel too, and longer) are not this side.
   std::vector<Eigen::Vector2d> chain;
   for (auto const& q : head)
     if (double const t = od.dot(q); t >= a0 && t <= a1) chain.push_back(q);
-  int const n = static_cast<int>(chain.size());
-  if (n < p.min_side_points) return std::nullopt;
+  if (static_cast<int>(chain.size()) < p.min_side_points) return std::nullopt;
   std::mt19937_64 rng(seed);
-  std::uniform_int_distribution<int> pick(0, n - 1);
-  Eigen::Vector3d best = Eigen::Vector3d::Zero();
-  int best_count = 0;
-  for (int s = 0; s < 4 * p.lmeds_samples; ++s) {
-    int const i = pick(rng), j = pick(rng);
-    Eigen::Vector2d const d = chain[j] - chain[i];
-    double const len = d.norm();
-    if (len < 4.0 || std::abs(od.dot(d / len)) < cos_max) continue;
-    Eigen::Vector2d const nrm(-d.y() / len, d.x() / len);
-    double const c = -nrm.dot(chain[i]);
-    int count = 0;
-    for (auto const& q : chain) count += std::abs(nrm.dot(q) + c) <= 1.0;
-    if (count > best_count) {
-      best_count = count;
-      best = Eigen::Vector3d(nrm.x(), nrm.y(), c);
-    }
-  }
-  if (best_count < p.min_side_points) return std::nullopt;
-  // The longest run of points on the line.
-  int run_start = -1, run_end = -1, cur_start = -1, last = -1, best_len = 0;
-  for (int i = 0; i < n; ++i) {
-    if (std::abs(best.head<2>().dot(chain[i]) + best.z()) > 1.0) continue;
-    if (cur_start < 0 || i - last > p.max_gap_points + 1) cur_start = i;
-    last = i;
-    if (i - cur_start + 1 > best_len) {
-      best_len = i - cur_start + 1;
-      run_start = cur_start;
-      run_end = i;
-    }
-  }
+  auto run = straightRun(chain, nullptr, 4 * p.lmeds_samples, rng, p, &od, cos_max);
+  if (!run) return std::nullopt;
   FollowedSide f;
-  for (int i = run_start; i >= 0 && i <= run_end; ++i)
-    if (std::abs(best.head<2>().dot(chain[i]) + best.z()) <= 1.0) f.points.push_back(chain[i]);
+  f.points = std::move(run->points);
   if (static_cast<int>(f.points.size()) < p.min_side_points) return std::nullopt;
   // A side of the same shaft: at least half as long as the other, and beside it for most of its
   // length (not a short straight stretch of the blob's outline).
-  auto const [b0, b1] = extent(f.points);
+  auto const [b0, b1] = extentAlong(od, f.points);
   double const overlap = std::min(a1, b1) - std::max(a0, b0);
   if (b1 - b0 < p.min_parallel_side_ratio * (a1 - a0) || overlap < p.min_parallel_side_ratio * (b1 - b0)) return std::nullopt;
   auto const ls = fitLineLS(f.points);
   if (!ls) return std::nullopt;
   f.line = *ls;
-  f.traversed = run_end + 1;
+  f.traversed = run->end + 1;
   return f;
+}
+
+// The straight stretches of a boundary sequence, longest first (straightRun(), each run taken out
+// of the sequence), up to `count` of min_side_points or more.
+std::vector<FollowedSide> straightStretches(std::vector<Eigen::Vector2d> const& seq, int count, ContourLinesParams const& p,
+                                            std::uint64_t seed) {
+  std::vector<FollowedSide> out;
+  if (static_cast<int>(seq.size()) < p.min_side_points) return out;
+  std::vector<unsigned char> used(seq.size(), 0);
+  std::mt19937_64 rng(seed);
+  for (int k = 0; k < count; ++k) {
+    auto run = straightRun(seq, &used, 8 * p.lmeds_samples, rng, p);
+    if (!run) break;
+    for (int i = run->begin; i >= 0 && i <= run->end; ++i) used[static_cast<std::size_t>(i)] = 1;
+    if (static_cast<int>(run->points.size()) < p.min_side_points) continue;
+    auto const ls = fitLineLS(run->points);
+    if (!ls) continue;
+    FollowedSide f;
+    f.points = std::move(run->points);
+    f.line = *ls;
+    out.push_back(std::move(f));
+  }
+  return out;
+}
+
+// The two sides of a shaft whose boundary is straight from the entry on neither side (a blob
+// merged on both sides near the entry, or one that also reaches the border): among the straight
+// stretches of the whole boundary (straightStretches()), the pair that is near-parallel, lies
+// beside each other over min_parallel_side_ratio of the shorter, at least 2 px apart, with the
+// seed between them (the strip they bound reaches the entry); the most points.
+std::optional<std::array<FollowedSide, 2>> stretchPair(std::vector<Eigen::Vector2d> const& seq, Eigen::Vector2d const& seed_pt,
+                                                       ContourLinesParams const& p, std::uint64_t seed) {
+  auto const st = straightStretches(seq, 4, p, seed);
+  double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
+  std::optional<std::array<FollowedSide, 2>> best;
+  std::size_t best_n = 0;
+  for (std::size_t a = 0; a < st.size(); ++a)
+    for (std::size_t b = a + 1; b < st.size(); ++b) {
+      Eigen::Vector3d la = st[a].line, lb = st[b].line;
+      if (std::abs(la.head<2>().dot(lb.head<2>())) < cos_max) continue;
+      if (la.head<2>().dot(lb.head<2>()) < 0.0) lb = -lb;
+      Eigen::Vector2d const d(-la.y(), la.x());
+      auto const [a0, a1] = extentAlong(d, st[a].points);
+      auto const [b0, b1] = extentAlong(d, st[b].points);
+      double const overlap = std::min(a1, b1) - std::max(a0, b0);
+      if (overlap < p.min_parallel_side_ratio * std::min(a1 - a0, b1 - b0)) continue;
+      // Apart, on opposite sides of the strip, the seed between them (within 2 px).
+      Eigen::Vector2d mb = Eigen::Vector2d::Zero(), ma = Eigen::Vector2d::Zero();
+      for (auto const& q : st[b].points) mb += q / static_cast<double>(st[b].points.size());
+      for (auto const& q : st[a].points) ma += q / static_cast<double>(st[a].points.size());
+      double const sep = la.head<2>().dot(mb) + la.z();
+      if (std::abs(sep) < 2.0) continue;
+      double const sa = (la.head<2>().dot(seed_pt) + la.z()) * (sep > 0 ? 1.0 : -1.0);
+      double const sb = (lb.head<2>().dot(seed_pt) + lb.z()) * ((lb.head<2>().dot(ma) + lb.z()) > 0 ? 1.0 : -1.0);
+      if (sa < -2.0 || sb < -2.0) continue;
+      std::size_t const n = st[a].points.size() + st[b].points.size();
+      if (n > best_n) {
+        best_n = n;
+        best = std::array<FollowedSide, 2>{st[a], st[b]};
+      }
+    }
+  return best;
 }
 
 }  // namespace
@@ -613,7 +716,7 @@ void setFarEnd(SideFit& fit) {
       }
 }
 
-SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p) {
+SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p, SideSearch search) {
   SideFit fit;
   auto const& B = region.boundary;
   int const n = static_cast<int>(B.size());
@@ -696,17 +799,49 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
     if (!fwd[s])
       why = static_cast<int>(chain[s].size()) < p.min_side_points ? ContourRejection::kTooFewPoints : ContourRejection::kNotStraight;
   if (why == ContourRejection::kNone) why = pairUp(*fwd[0], *fwd[1]);
-  if (why != ContourRejection::kNone && p.min_parallel_side_ratio > 0.0) {
+  bool const resought = search != SideSearch::kFromEntry;
+  if (resought) {  // the pair from the entry (if any) had no edges: sought again below
+    why = ContourRejection::kNotStraight;
+    fit.points = {};
+    fit.inliers = 0;
+  }
+  if (search == SideSearch::kStretchPair) {
+    // The whole boundary in order, from one end at the border through the entry to the other.
+    std::vector<Eigen::Vector2d> seq(chain[0].rbegin(), chain[0].rend());
+    seq.insert(seq.end(), chain[1].begin(), chain[1].end());
+    auto const pair = stretchPair(seq, Eigen::Vector2d(region.seed.x, region.seed.y), p, p.seed + 5);
+    if (pair && pairUp((*pair)[0], (*pair)[1]) == ContourRejection::kNone) {
+      fit.parallel = true;
+      why = ContourRejection::kNone;
+    }
+  }
+  int const only = search == SideSearch::kParallelFirst ? 0 : search == SideSearch::kParallelSecond ? 1 : -1;
+  if (why != ContourRejection::kNone && p.min_parallel_side_ratio > 0.0 && search != SideSearch::kStretchPair) {
     Eigen::Vector2d const sp(region.seed.x, region.seed.y);
     for (int s = 0; s < 2; ++s) {
-      if (!fwd[1 - s]) continue;
+      if (!fwd[1 - s] || (only >= 0 && s != only)) continue;
       auto const far = std::max_element(chain[s].begin(), chain[s].end(), [&](Eigen::Vector2d const& a, Eigen::Vector2d const& b) {
         return (a - sp).squaredNorm() < (b - sp).squaredNorm();
       });
       if (far == chain[s].end()) continue;
-      std::vector<Eigen::Vector2d> const head(chain[s].begin(), far + 1);
-      auto const side = parallelSide(head, *fwd[1 - s], p, p.seed + 2 + s);
-      if (side && pairUp(s == 0 ? *side : *fwd[0], s == 0 ? *fwd[1] : *side) == ContourRejection::kNone) {
+      std::vector<Eigen::Vector2d> head(chain[s].begin(), far + 1);
+      FollowedSide other = *fwd[1 - s];
+      if (resought && fit.merged) {
+        // A region that meets the border again (the blob reaches it): this side's chain ends
+        // there, and the shaft's side beyond the blob is on the other chain, after the other
+        // side's end (around the tip and back): walked from the border, off the other side's
+        // line. The other side's points beyond the gap where following it stopped (noise, an
+        // instrument crossing it) are added to it.
+        Eigen::Vector3d const o = other.line;
+        for (int i = static_cast<int>(chain[1 - s].size()) - 1; i >= fwd[1 - s]->traversed; --i) {
+          double const d = std::abs(o.head<2>().dot(chain[1 - s][i]) + o.z());
+          if (d > 1.5) head.push_back(chain[1 - s][i]);
+          else if (d <= 1.0) other.points.push_back(chain[1 - s][i]);
+        }
+        if (auto const l = fitLineLS(other.points)) other.line = *l;
+      }
+      auto const side = parallelSide(head, other, p, p.seed + 2 + s);
+      if (side && pairUp(s == 0 ? *side : other, s == 0 ? other : *side) == ContourRejection::kNone) {
         fit.parallel = true;
         why = ContourRejection::kNone;
         break;
@@ -877,7 +1012,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg & slab), both = cv::countNonZero(quad & reg);
     // A region merged with a crossing or touching instrument has that instrument's pixels near
     // the strip too: only the fill of the strip is required then.
-    double const inside = sides.merged ? p.min_inside_merged : p.min_inside;
+    double const inside = sides.merged || sides.parallel ? p.min_inside_merged : p.min_inside;
     if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < inside * nr) return reject(ContourRejection::kNotFilled);
   }
   fit.contour = c;

@@ -165,15 +165,18 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // A seed inside a region already refused for another seed (a shaft merged with a grey blob,
     // a vessel or another instrument) would grow that region again; where it enters the view
     // apart from that seed (not on the same stretch of the region's border), its own border run
-    // may still start a shaft's sides: only its strip search runs.
+    // may still start a shaft's sides: that region's sides are sought from this entry (below),
+    // and its strip search runs; nothing is grown again.
     bool const claimed = grower_.claimed(seed.position);
     bool in_refused = false;
+    int refused_region = -1;  // the refused region it lies in
     if (claimed && params_.strip.enabled && grower_.labels().at<std::uint8_t>(seed.position) == 255)
       for (std::size_t ri = 0; ri < res.regions.size() && !in_refused; ++ri) {
         Region const& r = res.regions[ri];
         in_refused = res.region_status[ri] != ContourRejection::kNone && r.box.contains(seed.position) &&
                      cv::pointPolygonTest(r.boundary, seed.position, false) >= 0 &&
                      !onOneBorderRun(r, fov_, r.seed, seed.position, params_.contours.border_margin);
+        if (in_refused) refused_region = static_cast<int>(ri);
       }
     if (claimed && !in_refused) continue;
     // Grow at each threshold level; score each level's straight-line pair cheaply and refine the
@@ -241,13 +244,19 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       best_score = sc->score;
       best_strip = std::move(sc);
     };
-    // A shaft found by the strip search in the last frame: searched about its sides first.
-    if (mem && mem->accepted && mem->strip && params_.strip.enabled) tryStrip(&*mem->strip);
+    // A shaft found by the strip search in the last frame: searched about its sides first, but
+    // every full_search_every frames its regions are grown first (below) and that strip is the
+    // fallback: a shaft found as a strip once (its region leaked then) is not held as a strip
+    // for good while growth would give it its region again.
+    bool const strip_first = mem && mem->accepted && mem->strip && params_.strip.enabled &&
+                             mem->age + elapsed < params_.full_search_every;
+    if (strip_first) tryStrip(&*mem->strip);
     struct Candidate {
       Region region;
       SideFit sides;
       double score;
       int level;
+      bool resought = false;  // sides sought again (see refineCandidates()) or from another seed's region
     };
     std::optional<Region> smallest;
     int smallest_level = 0;
@@ -257,24 +266,46 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // Candidates with a side found only as the stretch parallel to the other (fitSides(): a
     // shaft merged with a blob near its entry) come last, after the strip search.
     std::vector<Candidate> deferred;
+    // Re-sought candidates, refined last of all: a candidate refused for sides without edges has
+    // them sought again (fitSides(), SideSearch): the shaft's boundary with a grey blob (gauze)
+    // has no edge in the image, its boundary with the tissue beyond the blob has. A re-sought
+    // pair (and the region of another seed seen from this one, below) is less certain than a
+    // pair followed from the entry: it must be less chromatic than the tissue beside it as a
+    // strip with highlights must (max_full_res_ratio, matte or not: a pale tissue fold is matte),
+    // enter clearly across the border (resought_min_entry_sine), and is not remembered as a
+    // parallel pair to try first next frame.
+    std::vector<Candidate> resought;
+    StripSearchParams resought_contrast = params_.strip;
+    resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
+    ContourLinesParams resought_contours = params_.contours;
+    resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
     // Refines the candidates, best score first, until one is accepted.
     auto refineCandidates = [&](std::vector<Candidate>& cands) {
       std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
       for (auto& cd : cands) {
-        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, params_.contours);
-        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) {
-          f.contour.reset();
-          f.rejection = ContourRejection::kGlare;
+        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, cd.resought ? resought_contours : params_.contours);
+        if (f.contour) {
+          AcrossSamples const across = acrossContour(bgr, *f.contour);
+          if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
+          else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
+          if (f.rejection != ContourRejection::kNone) f.contour.reset();
         }
         if (f.contour) {
           best = std::move(cd.region);
           best_fit = std::move(f);
           best_level = cd.level;
           best_score = cd.score;
-          best_parallel = cd.sides.parallel;
+          best_parallel = cd.sides.parallel && !cd.resought;
           return;
         }
         why = f.rejection;
+        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel && params_.contours.min_parallel_side_ratio > 0.0)
+          for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
+            SideFit again = fitSides(cd.region, fov_, scale, params_.contours, search);
+            if (again.rejection != ContourRejection::kNone) continue;
+            double const score = scoreSides(again, bgr, params_.contours);
+            if (score >= 0.0) resought.push_back({cd.region, std::move(again), score, cd.level, true});
+          }
       }
     };
     auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
@@ -309,7 +340,28 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     std::vector<int> all(T.size());
     std::iota(all.begin(), all.end(), 0);
     if (in_refused) {
-      // strip search only (below)
+      // The refused region seen from this seed's border run: its two sides are split at this
+      // entry, not at the other seed's (a shaft merged with a blob that entered the view
+      // elsewhere and was searched first: gauze reaching another border). A re-sought candidate.
+      Region r = res.regions[static_cast<std::size_t>(refused_region)];
+      r.seed = seed.position;
+      r.seed_index = si;
+      if (r.area >= params_.regions.min_area) {
+        SideFit sf = fitSides(r, fov_, scale, params_.contours);
+        double const score = scoreSides(sf, bgr, params_.contours);
+        if (score >= 0.0) {
+          int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()),
+                                     static_cast<int>(T.size()) - 1);
+          Candidate cd{std::move(r), std::move(sf), score, level, true};
+          if (cd.sides.parallel) {
+            deferred.push_back(std::move(cd));
+          } else {
+            std::vector<Candidate> cands{std::move(cd)};
+            refineCandidates(cands);
+          }
+        }
+      }
+      // (then the strip search, below)
     } else if (!best && mem && mem->accepted) {
       std::vector<int> near;
       for (int d : {0, -1, 1})
@@ -329,10 +381,17 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // The region leaked or split at every level: search the shaft's sides from the seed directly
     // in the feature's gradient (strip_search.h), once per seed.
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
-    if (strip_run) tryStrip(nullptr);
+    if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
+    while (!best && !resought.empty()) {  // (refining them may re-seek more)
+      std::vector<Candidate> last = std::move(resought);
+      resought.clear();
+      refineCandidates(last);
+    }
     if (best) {
-      remember({seed.position, best_level, best_score, true, ContourRejection::kNone, 0, 0, 0, seed.width, best_strip});
+      // (a strip followed from the last frame's had no full search: its age goes on)
+      int const age = strip_first && best_strip ? mem->age + elapsed : 0;
+      remember({seed.position, best_level, best_score, true, ContourRejection::kNone, age, 0, 0, seed.width, best_strip});
       memory_now.back().parallel = best_parallel;
     }
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its

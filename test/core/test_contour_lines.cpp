@@ -337,16 +337,43 @@ TEST(ContourLines, RefinedLineIsFollowedAlongItsEdge) {
     EXPECT_GE(q.y(), 58.0);
     EXPECT_LE(q.y(), 121.0);
   }
-  // A gap of 30 rows (more than extend_max_misses profiles) ends the edge: the part beyond
-  // is not followed; a gap of 12 rows is crossed.
+  // A gap longer than extend_max_misses profiles ends the edge: the part beyond is not
+  // followed (30 rows with 10 misses allowed; 90 rows with the default 40); a gap of 30 rows
+  // is crossed with the default, one of 12 rows with 10.
+  ContourLinesParams p10 = p;
+  p10.extend_max_misses = 10;
+  cv::Scalar const tissue(60, 70, 170);
   cv::Mat gap = stepImage(5, 194);
-  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 129), cv::Scalar(60, 70, 170), cv::FILLED);
-  auto const g = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 129), tissue, cv::FILLED);
+  auto const g = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p10);
   ASSERT_TRUE(g);
   for (auto const& q : g->inliers) EXPECT_LT(q.y(), 101.0);
+  auto const g30 = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(g30);
+  double hi30 = 0.0;
+  for (auto const& q : g30->inliers) hi30 = std::max(hi30, q.y());
+  EXPECT_GT(hi30, 187.0);
+  cv::Mat far_gap = stepImage(5, 194);
+  cv::rectangle(far_gap, cv::Point(0, 100), cv::Point(99, 189), tissue, cv::FILLED);
+  auto const g90 = extendLineSubpixel(far_gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  ASSERT_TRUE(g90);
+  for (auto const& q : g90->inliers) EXPECT_LT(q.y(), 101.0);
+  // Beyond a gap, the edge must hold over 4 profiles in a row: a 5-row piece of it (2-3
+  // profiles) between two gaps is not taken, a 12-row piece is.
+  for (int piece : {5, 12}) {
+    cv::Mat pieces = stepImage(5, 194);
+    cv::rectangle(pieces, cv::Point(0, 100), cv::Point(99, 129), tissue, cv::FILLED);
+    cv::rectangle(pieces, cv::Point(0, 130 + piece), cv::Point(99, 199), tissue, cv::FILLED);
+    auto const gp = extendLineSubpixel(pieces, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+    ASSERT_TRUE(gp);
+    double hip = 0.0;
+    for (auto const& q : gp->inliers) hip = std::max(hip, q.y());
+    if (piece == 5) EXPECT_LT(hip, 101.0);
+    else EXPECT_GT(hip, 135.0);
+  }
   gap = stepImage(5, 194);
-  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 111), cv::Scalar(60, 70, 170), cv::FILLED);
-  auto const g2 = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p);
+  cv::rectangle(gap, cv::Point(0, 100), cv::Point(99, 111), tissue, cv::FILLED);
+  auto const g2 = extendLineSubpixel(gap, *r, tAt(60), tAt(90), -1e9, 1e9, p10);
   ASSERT_TRUE(g2);
   double hi2 = 0.0;
   for (auto const& q : g2->inliers) hi2 = std::max(hi2, q.y());
@@ -471,4 +498,78 @@ TEST(ContourLines, TheParallelSideIsBesideTheOtherNotOnATouchingInstrument) {
   EXPECT_LT(angle(fit.lines[1], truth.lines[1 - k]), 2.0);
   p.min_parallel_side_ratio = 0.0;  // without the parallel side: refused
   EXPECT_NE(fitSides(*region, fov, 2, p).rejection, ContourRejection::kNone);
+}
+
+namespace {
+// A horizontal shaft entering from the left border of a 320x240 feature image (rows 100..130,
+// up to column 200), with low-feature blobs merged with it near the entry: one below it that
+// reaches the bottom border (gauze) and, optionally, one across its upper side.
+struct MergedShaft {
+  cv::Mat feature;
+  FieldOfView fov;
+  std::optional<Region> region;
+};
+MergedShaft mergedShaft(bool upper_blob) {
+  MergedShaft m;
+  cv::Mat const bgr(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));
+  m.fov = detectFieldOfView(bgr);
+  m.feature = cv::Mat(bgr.size(), CV_8U, cv::Scalar(200));
+  cv::rectangle(m.feature, cv::Rect(0, 100, 201, 31), cv::Scalar(10), cv::FILLED);
+  cv::circle(m.feature, cv::Point(50, 200), 75, cv::Scalar(12), cv::FILLED);  // below, to the bottom border
+  if (upper_blob) cv::circle(m.feature, cv::Point(60, 95), 20, cv::Scalar(12), cv::FILLED);
+  RegionGrower grower;
+  grower.reset(m.feature, m.fov);
+  m.region = grower.grow({3, 115}, 30);
+  return m;
+}
+// Whether the fit's lines are the shaft's sides (rows 100 and 130), within 1 deg and 0.5 px.
+bool onTheShaftsSides(SideFit const& fit) {
+  if (fit.rejection != ContourRejection::kNone) return false;
+  bool rows[2] = {false, false};
+  for (auto const& l : fit.lines) {
+    if (std::abs(l.x()) > std::sin(M_PI / 180.0)) return false;
+    double const y = -(l.x() * 150.0 + l.z()) / l.y();
+    for (int k = 0; k < 2; ++k) rows[k] = rows[k] || std::abs(y - (k ? 130.0 : 100.0)) < 0.5;
+  }
+  return rows[0] && rows[1];
+}
+}  // namespace
+
+TEST(ContourLines, SidesSoughtAgainAsTheStraightStretchesBeyondBlobsOnBothSides) {
+  // Blobs across both sides near the entry, the lower one reaching the border: neither side is
+  // straight from the entry. Sought again as the best facing pair of straight stretches of the
+  // whole boundary (SideSearch::kStretchPair), the sides are the shaft's beyond the blobs.
+  auto const m = mergedShaft(true);
+  ASSERT_TRUE(m.region);
+  ContourLinesParams const p;
+  EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
+  SideFit const fit = fitSides(*m.region, m.fov, 1, p, SideSearch::kStretchPair);
+  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
+  EXPECT_TRUE(fit.parallel);
+  EXPECT_TRUE(fit.merged);
+  EXPECT_TRUE(onTheShaftsSides(fit));
+  // Each side from its stretch beyond the blobs only (the upper blob ends at column 80, the
+  // lower one at 125).
+  for (auto const& side : fit.points)
+    for (auto const& q : side) EXPECT_GE(q.x(), 78.0);
+}
+
+TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
+  // Only the lower blob: the upper side is straight from the entry, the lower chain runs around
+  // the blob to the bottom border and ends there; the shaft's lower side beyond the blob is on
+  // the other chain, after the upper side's end. Sought again as the stretch parallel to the
+  // upper side (kParallelFirst or kParallelSecond, whichever chain is the lower one), it is found
+  // there; from the entry (kFromEntry) it is not.
+  auto const m = mergedShaft(false);
+  ASSERT_TRUE(m.region);
+  ContourLinesParams const p;
+  EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
+  int found = 0;
+  for (SideSearch s : {SideSearch::kParallelFirst, SideSearch::kParallelSecond}) {
+    SideFit const fit = fitSides(*m.region, m.fov, 1, p, s);
+    if (!onTheShaftsSides(fit)) continue;
+    ++found;
+    EXPECT_TRUE(fit.parallel);
+  }
+  EXPECT_EQ(found, 1);
 }

@@ -206,6 +206,41 @@ TEST(Segmentation, ShaftInsideARegionRefusedForAnotherSeed) {
   EXPECT_EQ(unmatched, 0);
 }
 
+// The hard rendered scene, frames 100 and 105 each alone: the gauze lies across both sides of
+// the left shaft near its entry and reaches the bottom border, where its own seed is searched
+// first and its region (gauze and shaft) refused. The left border's seed sees that region from
+// its own entry; the pair followed from there has no edges (gauze beside the shaft), and the
+// sides sought again as the facing straight stretches beyond the gauze are the shaft's: found,
+// both lines within 1 px of the truth. Not found without the re-sought sides (no parallel
+// sides at all), nor when re-sought pairs must enter at more than 90 deg (sine 1).
+TEST(Segmentation, AShaftMergedWithGauzeOnBothSidesIsFoundFromItsOwnEntry) {
+  HardScene hard;
+  auto found = [&](int k, SegmentationParams const& sp) {
+    auto const views = hard.scene.frame(k);
+    ApparentContour const& truth = views[0].truth;  // the left shaft
+    EXPECT_LT(truth.entry_px.x(), 1.0);
+    InstrumentSegmenter seg(sp);
+    auto const res = seg.process(hard.renderer.render(views, k));
+    for (auto const& c : res.contours) {
+      double e = 0.0;
+      for (int l = 0; l < 2; ++l)
+        for (Eigen::Vector2d const& q : {truth.entry_px, truth.tip_px})
+          e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
+      if (e < 1.0) return true;
+    }
+    return false;
+  };
+  for (int k : {100, 105}) {
+    SegmentationParams sp;
+    EXPECT_TRUE(found(k, sp)) << "frame " << k;
+    sp.resought_min_entry_sine = 1.0;
+    EXPECT_FALSE(found(k, sp)) << "frame " << k;
+    sp = SegmentationParams{};
+    sp.contours.min_parallel_side_ratio = 0.0;
+    EXPECT_FALSE(found(k, sp)) << "frame " << k;
+  }
+}
+
 // The hard rendered scene, frames 3 and 8 each alone: the left shaft enters the bottom border
 // beside the gauze blob, which lies on the border; the border's tissue level there is the
 // gauze's, low, so the seed's growth levels were all lowered below the metal's level and the

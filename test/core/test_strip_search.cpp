@@ -201,6 +201,7 @@ TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
   };
   SegmentationParams sp;
   sp.strip.enabled = false;
+  sp.contours.min_parallel_side_ratio = 0.0;  // (nor as a side pair beside the membrane: SideSearch)
   InstrumentSegmenter without(sp);
   auto const r0 = without.process(img);
   for (auto const& c : r0.contours) EXPECT_GT(onShaft(c), 0.5) << "found without the strip search: the test scene does not leak";

@@ -36,9 +36,13 @@ struct ContourLinesParams {
                                               ///< takes a brightness drop this steep (0: never; 8 found
                                               ///< 1 more in-vivo shaft but cost 0.25 px of line accuracy)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
-  int extend_max_misses = 10;     ///< a refined line is followed beyond its region side until this many
-                                  ///< profiles in a row give no edge on it (10: 20 px of occlusion are
-                                  ///< crossed; 3 and a 0.5 px gate: hard-scene line p95 0.463 px; 0: not followed)
+  int extend_max_misses = 40;     ///< a refined line is followed beyond its region side until this many
+                                  ///< profiles in a row give no edge on it (40: 80 px of occlusion, an
+                                  ///< instrument's tip across the shaft, are crossed; beyond a gap of more
+                                  ///< than 3 profiles 4 in a row must confirm the edge. Hard scene, from
+                                  ///< 10 without confirmation: line p95 0.463 -> 0.403 px, direction 0.84 ->
+                                  ///< 0.76 deg; 30 without confirmation: in-vivo lines 2.31 -> 2.39 px, one
+                                  ///< shaft's lines jumped to another edge (3.0 -> 23 px); 0: not followed)
   double extend_gate_px = 0.75;   ///< ... "on it": within max(3 residuals, this)
   double line_sigma_floor_px = 0.25;  ///< px: systematic error at each end of a line, added to the covariance
                                       ///< the residuals give. They miss the errors common to the edge points
@@ -154,7 +158,18 @@ struct SideFit {
   /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
 };
-SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+/// How fitSides() seeks the two sides. kFromEntry: each followed from the entry; a side that is
+/// not straight from there (a grey blob merged with the shaft near its entry: gauze) is sought as
+/// the stretch of its chain parallel to the other. The others re-seek the sides of a region whose
+/// side pair had no edge in the image (the shaft's boundary with a blob of the same feature level
+/// has none; its boundary with the tissue beyond the blob has): kParallelFirst / kParallelSecond,
+/// that side (boundary-chain order) only as the parallel stretch, even when straight from the
+/// entry; kStretchPair, both as the best facing pair of straight stretches of the whole boundary
+/// (a blob on both sides of the shaft, or reaching the border). Where the region meets the border
+/// more than once, the re-sought side may lie on the other chain beyond the other side's end.
+enum class SideSearch { kFromEntry, kParallelFirst, kParallelSecond, kStretchPair };
+SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params,
+                 SideSearch search = SideSearch::kFromEntry);
 /// Sets fit.far to the side point farthest from fit.entry.
 void setFarEnd(SideFit& fit);
 /// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge

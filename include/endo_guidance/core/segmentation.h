@@ -27,6 +27,12 @@ struct SegmentationParams {
   int full_search_every = 5;      ///< frames: a rejected seed is searched in full again this often, but
   int strip_search_max_every = 30; ///< its strip search (the costliest step) less and less often: the
                                    ///< interval doubles, up to this, while the strip search keeps failing
+  /// A shaft's sides sought again after the first pair had no edges (fitSides() SideSearch), or
+  /// from a region another seed grew, must enter the view at least this steeply: the sine of
+  /// the angle between the axis and the border where it leaves the view (as
+  /// ContourLinesParams::min_entry_sine, for these only). Clean rendered scene: 0.1 let a stretch
+  /// of a shaft lying along the bottom border through (0.007 -> 0.013 false per frame).
+  double resought_min_entry_sine = 0.3;
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
