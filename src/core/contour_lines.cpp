@@ -670,9 +670,13 @@ std::vector<FollowedSide> straightStretches(std::vector<Eigen::Vector2d> const& 
 // stretches of the whole boundary (straightStretches()), the pair that is near-parallel, lies
 // beside each other over min_parallel_side_ratio of the shorter, at least 2 px apart, with the
 // seed between them (the strip they bound reaches the entry); the most points.
-std::optional<std::array<FollowedSide, 2>> stretchPair(std::vector<Eigen::Vector2d> const& seq, Eigen::Vector2d const& seed_pt,
-                                                       ContourLinesParams const& p, std::uint64_t seed) {
-  auto const st = straightStretches(seq, 4, p, seed);
+std::optional<std::array<FollowedSide, 2>> stretchPair(std::vector<std::vector<Eigen::Vector2d>> const& pieces,
+                                                       Eigen::Vector2d const& seed_pt, ContourLinesParams const& p, std::uint64_t seed) {
+  std::vector<FollowedSide> st;
+  for (std::size_t k = 0; k < pieces.size(); ++k) {
+    auto s = straightStretches(pieces[k], 4, p, seed + k);
+    std::move(s.begin(), s.end(), std::back_inserter(st));
+  }
   double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
   std::optional<std::array<FollowedSide, 2>> best;
   std::size_t best_n = 0;
@@ -806,10 +810,27 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
     fit.inliers = 0;
   }
   if (search == SideSearch::kStretchPair) {
-    // The whole boundary in order, from one end at the border through the entry to the other.
-    std::vector<Eigen::Vector2d> seq(chain[0].rbegin(), chain[0].rend());
-    seq.insert(seq.end(), chain[1].begin(), chain[1].end());
-    auto const pair = stretchPair(seq, Eigen::Vector2d(region.seed.x, region.seed.y), p, p.seed + 5);
+    // The whole boundary, in its pieces between the stretches on the FOV border: where the
+    // region meets the border more than once, the shaft's far side can lie on a piece that
+    // leaves the view at neither end of the entry run (between a blob's and another
+    // instrument's border runs).
+    std::vector<std::vector<Eigen::Vector2d>> pieces;
+    int start = 0;
+    while (start < n && !border[start]) ++start;  // a border point to start from (one exists: the entry)
+    for (int k = 1; k <= n; ++k) {
+      int const i = (start + k) % n;
+      if (border[i]) {
+        if (!pieces.empty() && !pieces.back().empty()) pieces.emplace_back();
+        continue;
+      }
+      if (pieces.empty()) pieces.emplace_back();
+      pieces.back().emplace_back(B[i].x, B[i].y);
+    }
+    if (start == n) {  // (no point on the border: one closed piece)
+      pieces.assign(1, {});
+      for (auto const& q : B) pieces[0].emplace_back(q.x, q.y);
+    }
+    auto const pair = stretchPair(pieces, Eigen::Vector2d(region.seed.x, region.seed.y), p, p.seed + 5);
     if (pair && pairUp((*pair)[0], (*pair)[1]) == ContourRejection::kNone) {
       fit.parallel = true;
       why = ContourRejection::kNone;

@@ -509,7 +509,7 @@ struct MergedShaft {
   FieldOfView fov;
   std::optional<Region> region;
 };
-MergedShaft mergedShaft(bool upper_blob) {
+MergedShaft mergedShaft(bool upper_blob, bool touching_band = false) {
   MergedShaft m;
   cv::Mat const bgr(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));
   m.fov = detectFieldOfView(bgr);
@@ -517,6 +517,10 @@ MergedShaft mergedShaft(bool upper_blob) {
   cv::rectangle(m.feature, cv::Rect(0, 100, 201, 31), cv::Scalar(10), cv::FILLED);
   cv::circle(m.feature, cv::Point(50, 200), 75, cv::Scalar(12), cv::FILLED);  // below, to the bottom border
   if (upper_blob) cv::circle(m.feature, cv::Point(60, 95), 20, cv::Scalar(12), cv::FILLED);
+  if (touching_band) {  // another instrument from the right border, touching the shaft's upper side near its tip
+    std::vector<cv::Point> const band{{170, 100}, {195, 100}, {319, 70}, {319, 45}};
+    cv::fillConvexPoly(m.feature, band, cv::Scalar(12));
+  }
   RegionGrower grower;
   grower.reset(m.feature, m.fov);
   m.region = grower.grow({3, 115}, 30);
@@ -572,4 +576,20 @@ TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
     EXPECT_TRUE(fit.parallel);
   }
   EXPECT_EQ(found, 1);
+}
+
+TEST(ContourLines, SidesSoughtAgainOnTheWholeBoundaryBetweenItsBorderStretches) {
+  // Blobs across both sides near the entry, the lower one reaching the bottom border, and
+  // another instrument touching the shaft near its tip and reaching the right border (the hard
+  // scene's frames 276-298): the shaft's lower side beyond the blob lies on the piece of the
+  // boundary between the right and bottom border runs, on neither chain that leaves the entry.
+  // The facing pair of straight stretches is sought on every piece of the boundary.
+  auto const m = mergedShaft(true, true);
+  ASSERT_TRUE(m.region);
+  ContourLinesParams const p;
+  EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
+  SideFit const fit = fitSides(*m.region, m.fov, 1, p, SideSearch::kStretchPair);
+  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
+  EXPECT_TRUE(fit.merged);
+  EXPECT_TRUE(onTheShaftsSides(fit));
 }

@@ -164,8 +164,9 @@ struct SideFit {
 /// side pair had no edge in the image (the shaft's boundary with a blob of the same feature level
 /// has none; its boundary with the tissue beyond the blob has): kParallelFirst / kParallelSecond,
 /// that side (boundary-chain order) only as the parallel stretch, even when straight from the
-/// entry; kStretchPair, both as the best facing pair of straight stretches of the whole boundary
-/// (a blob on both sides of the shaft, or reaching the border). Where the region meets the border
+/// entry; kStretchPair, both as the best facing pair of straight stretches of the whole boundary,
+/// on every piece of it between its stretches on the FOV border (a blob on both sides of the
+/// shaft, or reaching the border; another instrument joined at the tip). Where the region meets the border
 /// more than once, the re-sought side may lie on the other chain beyond the other side's end.
 enum class SideSearch { kFromEntry, kParallelFirst, kParallelSecond, kStretchPair };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params,
