@@ -543,19 +543,26 @@ TEST(ContourLines, SidesSoughtAgainAsTheStraightStretchesBeyondBlobsOnBothSides)
   // Blobs across both sides near the entry, the lower one reaching the border: neither side is
   // straight from the entry. Sought again as the best facing pair of straight stretches of the
   // whole boundary (SideSearch::kStretchPair), the sides are the shaft's beyond the blobs.
-  auto const m = mergedShaft(true);
-  ASSERT_TRUE(m.region);
-  ContourLinesParams const p;
-  EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
-  SideFit const fit = fitSides(*m.region, m.fov, 1, p, SideSearch::kStretchPair);
-  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
-  EXPECT_TRUE(fit.parallel);
-  EXPECT_TRUE(fit.merged);
-  EXPECT_TRUE(onTheShaftsSides(fit));
-  // Each side from its stretch beyond the blobs only (the upper blob ends at column 80, the
-  // lower one at 125).
-  for (auto const& side : fit.points)
-    for (auto const& q : side) EXPECT_GE(q.x(), 78.0);
+  // Also with another instrument touching the shaft near its tip and reaching the right border
+  // (the hard scene's frames 276-298): the shaft's lower side beyond the blob then lies on the
+  // piece of the boundary between the right and bottom border runs, on neither chain that
+  // leaves the entry; the stretches are sought on every piece of the boundary.
+  for (bool touching : {false, true}) {
+    SCOPED_TRACE(touching ? "another instrument touching the tip" : "blobs only");
+    auto const m = mergedShaft(true, touching);
+    ASSERT_TRUE(m.region);
+    ContourLinesParams const p;
+    EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
+    SideFit const fit = fitSides(*m.region, m.fov, 1, p, SideSearch::kStretchPair);
+    ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
+    EXPECT_TRUE(fit.parallel);
+    EXPECT_TRUE(fit.merged);
+    EXPECT_TRUE(onTheShaftsSides(fit));
+    // Each side from its stretch beyond the blobs only (the upper blob ends at column 80, the
+    // lower one at 125).
+    for (auto const& side : fit.points)
+      for (auto const& q : side) EXPECT_GE(q.x(), 78.0);
+  }
 }
 
 TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
@@ -576,20 +583,4 @@ TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
     EXPECT_TRUE(fit.parallel);
   }
   EXPECT_EQ(found, 1);
-}
-
-TEST(ContourLines, SidesSoughtAgainOnTheWholeBoundaryBetweenItsBorderStretches) {
-  // Blobs across both sides near the entry, the lower one reaching the bottom border, and
-  // another instrument touching the shaft near its tip and reaching the right border (the hard
-  // scene's frames 276-298): the shaft's lower side beyond the blob lies on the piece of the
-  // boundary between the right and bottom border runs, on neither chain that leaves the entry.
-  // The facing pair of straight stretches is sought on every piece of the boundary.
-  auto const m = mergedShaft(true, true);
-  ASSERT_TRUE(m.region);
-  ContourLinesParams const p;
-  EXPECT_FALSE(onTheShaftsSides(fitSides(*m.region, m.fov, 1, p)));
-  SideFit const fit = fitSides(*m.region, m.fov, 1, p, SideSearch::kStretchPair);
-  ASSERT_EQ(fit.rejection, ContourRejection::kNone) << toString(fit.rejection);
-  EXPECT_TRUE(fit.merged);
-  EXPECT_TRUE(onTheShaftsSides(fit));
 }
