@@ -1032,7 +1032,8 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     }
     double const nq = cv::countNonZero(quad), nr = cv::countNonZero(reg & slab), both = cv::countNonZero(quad & reg);
     // A region merged with a crossing or touching instrument has that instrument's pixels near
-    // the strip too: only the fill of the strip is required then.
+    // the strip too, and one with a side found as the parallel stretch the blob beside it: only
+    // the fill of the strip is required then (hard scene 87.2 -> 90.0 % found with the latter).
     double const inside = sides.merged || sides.parallel ? p.min_inside_merged : p.min_inside;
     if (nq <= 0 || nr <= 0 || both < p.min_fill * nq || both < inside * nr) return reject(ContourRejection::kNotFilled);
   }

@@ -383,7 +383,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
-    while (!best && !resought.empty()) {  // (refining them may re-seek more)
+    while (!best && !resought.empty()) {  // (a re-sought pair is a parallel one: it re-seeks nothing)
       std::vector<Candidate> last = std::move(resought);
       resought.clear();
       refineCandidates(last);
