@@ -802,13 +802,10 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   for (int s = 0; s < 2 && why == ContourRejection::kNone; ++s)
     if (!fwd[s])
       why = static_cast<int>(chain[s].size()) < p.min_side_points ? ContourRejection::kTooFewPoints : ContourRejection::kNotStraight;
-  if (why == ContourRejection::kNone) why = pairUp(*fwd[0], *fwd[1]);
+  // Re-sought: the pair from the entry (if any) had no edges; the sides are sought again below.
   bool const resought = search != SideSearch::kFromEntry;
-  if (resought) {  // the pair from the entry (if any) had no edges: sought again below
-    why = ContourRejection::kNotStraight;
-    fit.points = {};
-    fit.inliers = 0;
-  }
+  if (resought) why = ContourRejection::kNotStraight;
+  if (why == ContourRejection::kNone) why = pairUp(*fwd[0], *fwd[1]);
   if (search == SideSearch::kStretchPair) {
     // The whole boundary, in its pieces between the stretches on the FOV border: where the
     // region meets the border more than once, the shaft's far side can lie on a piece that

@@ -159,6 +159,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   grower_.reset(filtered_, fov_);
   bool have_gradient = false;
   double const max_area = params_.regions.max_area_fraction * fov_area_;
+  // The stricter checks of re-sought side pairs (see `resought` below).
+  StripSearchParams resought_contrast = params_.strip;
+  resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
+  ContourLinesParams resought_contours = params_.contours;
+  resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
   for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     Seed const& seed = res.seeds[si];
@@ -275,10 +280,6 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // enter clearly across the border (resought_min_entry_sine), and is not remembered as a
     // parallel pair to try first next frame.
     std::vector<Candidate> resought;
-    StripSearchParams resought_contrast = params_.strip;
-    resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
-    ContourLinesParams resought_contours = params_.contours;
-    resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
     // Refines the candidates, best score first, until one is accepted.
     auto refineCandidates = [&](std::vector<Candidate>& cands) {
       std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
