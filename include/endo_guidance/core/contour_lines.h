@@ -182,9 +182,10 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
 
 /// A refined line (over [t0, t1] along its direction (-b, a)) followed beyond that extent, within
 /// [t_lo, t_hi]: one narrow profile every refine_step_px, kept while its edge lies on the line
-/// (within max(3 residuals, extend_gate_px)), until extend_max_misses profiles in a row miss; the
-/// line refitted over all its points, refitted every 16 new ones on the way. nullopt: nothing
-/// added, or the extension made the residual worse (another edge).
+/// (within max(3 residuals, extend_gate_px)), until extend_max_misses profiles in a row miss;
+/// past a gap of more than 3 profiles, the edge counts again only once 4 profiles in a row hold
+/// it. The line refitted over all its points, refitted every 16 new ones on the way. nullopt:
+/// nothing added, or the extension made the residual worse (another edge).
 std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
                                               double t_lo, double t_hi, ContourLinesParams const& params);
 
