@@ -280,6 +280,17 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // enter clearly across the border (resought_min_entry_sine), and is not remembered as a
     // parallel pair to try first next frame.
     std::vector<Candidate> resought;
+    // The sides of `region` sought again (its pair from the entry had no edges, or none was found
+    // in a region another seed grew): re-sought candidates.
+    auto reseek = [&](Region const& region, int level) {
+      if (params_.contours.min_parallel_side_ratio <= 0.0) return;
+      for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
+        SideFit again = fitSides(region, fov_, scale, params_.contours, search);
+        if (again.rejection != ContourRejection::kNone) continue;
+        double const score = scoreSides(again, bgr, params_.contours);
+        if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
+      }
+    };
     // Refines the candidates, best score first, until one is accepted.
     auto refineCandidates = [&](std::vector<Candidate>& cands) {
       std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
@@ -300,13 +311,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           return;
         }
         why = f.rejection;
-        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel && params_.contours.min_parallel_side_ratio > 0.0)
-          for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
-            SideFit again = fitSides(cd.region, fov_, scale, params_.contours, search);
-            if (again.rejection != ContourRejection::kNone) continue;
-            double const score = scoreSides(again, bgr, params_.contours);
-            if (score >= 0.0) resought.push_back({cd.region, std::move(again), score, cd.level, true});
-          }
+        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level);
       }
     };
     auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
@@ -343,16 +348,19 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     if (in_refused) {
       // The refused region seen from this seed's border run: its two sides are split at this
       // entry, not at the other seed's (a shaft merged with a blob that entered the view
-      // elsewhere and was searched first: gauze reaching another border). A re-sought candidate.
+      // elsewhere and was searched first: gauze reaching another border). A re-sought candidate;
+      // without a pair with edges from this entry, its sides are sought again (hard scene 95.7 ->
+      // 97.1 % found: the gauze on both sides of the shaft at its entry).
       Region r = res.regions[static_cast<std::size_t>(refused_region)];
       r.seed = seed.position;
       r.seed_index = si;
       if (r.area >= params_.regions.min_area) {
         SideFit sf = fitSides(r, fov_, scale, params_.contours);
         double const score = scoreSides(sf, bgr, params_.contours);
+        int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()),
+                                   static_cast<int>(T.size()) - 1);
+        if (score < 0.0 && !sf.parallel) reseek(r, level);  // no pair with edges from this entry
         if (score >= 0.0) {
-          int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()),
-                                     static_cast<int>(T.size()) - 1);
           Candidate cd{std::move(r), std::move(sf), score, level, true};
           if (cd.sides.parallel) {
             deferred.push_back(std::move(cd));

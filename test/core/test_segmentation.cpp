@@ -206,13 +206,14 @@ TEST(Segmentation, ShaftInsideARegionRefusedForAnotherSeed) {
   EXPECT_EQ(unmatched, 0);
 }
 
-// The hard rendered scene, frames 100 and 105 each alone: the gauze lies across both sides of
-// the left shaft near its entry and reaches the bottom border, where its own seed is searched
+// The hard rendered scene, frames 100, 105 and 116 each alone: the gauze lies across both sides
+// of the left shaft near its entry and reaches the bottom border, where its own seed is searched
 // first and its region (gauze and shaft) refused. The left border's seed sees that region from
-// its own entry; the pair followed from there has no edges (gauze beside the shaft), and the
-// sides sought again as the facing straight stretches beyond the gauze are the shaft's: found,
-// both lines within 1 px of the truth. Not found without the re-sought sides (no parallel
-// sides at all), nor when re-sought pairs must enter at more than 90 deg (sine 1).
+// its own entry; the pair followed from there has no edges (gauze beside the shaft; in frame
+// 116 the pair is not even near-parallel), and the sides sought again as the facing straight
+// stretches beyond the gauze are the shaft's: found, both lines within 1 px of the truth. Not
+// found without the re-sought sides (no parallel sides at all), nor when re-sought pairs must
+// enter at more than 90 deg (sine 1).
 TEST(Segmentation, AShaftMergedWithGauzeOnBothSidesIsFoundFromItsOwnEntry) {
   HardScene hard;
   auto found = [&](int k, SegmentationParams const& sp) {
@@ -230,7 +231,7 @@ TEST(Segmentation, AShaftMergedWithGauzeOnBothSidesIsFoundFromItsOwnEntry) {
     }
     return false;
   };
-  for (int k : {100, 105}) {
+  for (int k : {100, 105, 116}) {
     SegmentationParams sp;
     EXPECT_TRUE(found(k, sp)) << "frame " << k;
     sp.resought_min_entry_sine = 1.0;
