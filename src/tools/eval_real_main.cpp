@@ -83,6 +83,11 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     ++st.images;
     InstrumentSegmenter seg(sp);  // stills: no temporal state
     SegmentationResult const r = seg.process(im);
+    // The field of view at full resolution, less 3 px at its edge.
+    cv::Mat inner_fov;
+    cv::resize(seg.fieldOfView().mask, inner_fov, im.size(), 0, 0, cv::INTER_NEAREST);
+    cv::erode(inner_fov, inner_fov, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(7, 7)), cv::Point(-1, -1), 1,
+              cv::BORDER_CONSTANT, cv::Scalar(255));
     // Instances: shaft pixels (class 160) of each instrument id.
     std::map<int, cv::Mat> shafts, whole;
     for (int y = 0; y < ins.rows; ++y)
@@ -126,10 +131,12 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       if (std::find(ids.begin(), ids.end(), best) == ids.end()) continue;  // a tiny instance: neither
       found[best] = true;
       // Boundary of the instance's shaft mask, inside the image and the field of view, between
-      // the entry and the tip: each pixel to the nearer contour line.
+      // the entry and the tip: each pixel to the nearer contour line. (Where the shaft leaves the
+      // view its mask ends on the image border -- the erosion's border counts as mask -- or on
+      // the edge of a circular field of view: neither is a side of the shaft.)
       cv::Mat er, bd;
       cv::erode(shafts[best], er, cv::Mat());
-      bd = shafts[best] & ~er;
+      bd = shafts[best] & ~er & inner_fov;
       Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
       double const len = (c.tip_px - c.entry_px).norm();
       std::vector<double> d, signed_d;
