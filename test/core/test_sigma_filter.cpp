@@ -31,7 +31,8 @@ cv::Mat reference(cv::Mat const& src, int R, int delta) {
 }  // namespace
 
 TEST(SigmaFilter, MatchesTheDefinition) {
-  // Widths with and without a tail after the 16-pixel blocks; random values, and a smooth ramp
+  // Widths through each path: 32-pixel (AVX2) and 16-pixel (SSE2) blocks, and a scalar tail
+  // (53 = 32 + 16 + 5 where the CPU has AVX2); random values, and a smooth ramp
   // (many windows whose mean is exactly half-way: the rounding must be half up, as defined).
   for (int w : {53, 64, 5}) {
     cv::Mat img(37, w, CV_8U), ramp(37, w, CV_8U);
