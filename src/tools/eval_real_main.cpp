@@ -6,7 +6,12 @@
 //   in-vivo stills (EndoVis'15 rigid, OP1+OP2, 80 images 640x480): shaft recall, false shafts per
 //   image, and the distance of each matched shaft's mask boundary to its contour line.
 //   robotic sequences (EndoVis'15 robotic, 720x576): image-axis error against the annotated
-//   shaft axes (ShaftPoint -> EndPoint) on the annotated frames.
+//   shaft axes (ShaftPoint -> EndPoint) on the annotated frames; the insertion points the
+//   pipeline discovers; and per annotated tool, its trocar's image as the common point of its
+//   annotated and of its detected image axes, and its 3-D trocar from its detections' axes
+//   (conditioning, elongation, stability over 4-s blocks). No intrinsics are published: assumed.
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -22,6 +27,7 @@
 
 #include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/core/insertion_point.h"
+#include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/pipeline.h"
 #include "tool_util.h"
 #include "endo_guidance/core/segmentation.h"
@@ -236,6 +242,59 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   return ok;
 }
 
+// Each tool's trocar from the axes of its own detections (the annotation says which tool a
+// detection is; the pipeline's discovery gets no such help): the robust common point (Eq. (3),
+// LMedS) of all of them, how ill-conditioned it is (the angular spread of the axes; the
+// estimate's standard deviations along its principal directions, the longest compared with the
+// mean axis), and its stability: the same estimate from consecutive blocks of 20 axes (about 4 s
+// of video), their RMS deviation from the whole-clip estimate along and across the mean axis.
+void reportToolTrocars(std::map<int, std::vector<PluckerLine>> const& tool_axes, std::map<int, std::vector<double>> const& tool_image_deg,
+                       Eigen::Matrix3d const& K, cv::Size size) {
+  for (auto const& [tool, axes] : tool_axes) {
+    double span = 0.0;  // of the annotated image directions (deg)
+    if (auto const it = tool_image_deg.find(tool); it != tool_image_deg.end() && !it->second.empty())
+      span = *std::max_element(it->second.begin(), it->second.end()) - *std::min_element(it->second.begin(), it->second.end());
+    if (axes.size() < 10) {
+      std::printf("    tool %d: %zu axes, too few for a trocar\n", tool, axes.size());
+      continue;
+    }
+    InsertionPointEstimate const e = intersectAxesRobust(axes);
+    if (!e.ok()) {
+      std::printf("    tool %d: %zu axes, no common point (%s)\n", tool, axes.size(), toString(e.status));
+      continue;
+    }
+    // Mean axis direction (sign-aligned) and the estimate's principal directions.
+    Eigen::Vector3d dm = Eigen::Vector3d::Zero();
+    for (auto const& a : axes) dm += a.direction().dot(axes.front().direction()) < 0.0 ? -a.direction() : a.direction();
+    dm.normalize();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(e.covariance);
+    Eigen::Vector3d const sd = es.eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    double const major_to_axis = std::acos(std::min(1.0, std::abs(es.eigenvectors().col(2).dot(dm)))) * 180.0 / M_PI;
+    Eigen::Vector3d const ip = K * e.position;
+    Eigen::Vector2d const px = ip.head<2>() / ip.z();
+    bool const inside = ip.z() > 0 && px.x() >= 0 && px.y() >= 0 && px.x() < size.width && px.y() < size.height;
+    // Blocks of 20 consecutive axes.
+    double along2 = 0.0, across2 = 0.0;
+    int blocks = 0;
+    for (std::size_t b = 0; b + 20 <= axes.size(); b += 20) {
+      InsertionPointEstimate const eb = intersectAxesRobust(std::vector<PluckerLine>(axes.begin() + b, axes.begin() + b + 20));
+      if (!eb.ok()) continue;
+      Eigen::Vector3d const dv = eb.position - e.position;
+      along2 += dv.dot(dm) * dv.dot(dm);
+      across2 += (dv - dv.dot(dm) * dm).squaredNorm();
+      ++blocks;
+    }
+    std::printf("    tool %d: %zu axes, %zu inliers, rms %.1f mm: (%.0f, %.0f, %.0f) mm, image (%.0f, %.0f)%s; 3-D axes' spread "
+                "%.1f deg (annotated image directions span %.1f deg); sd %.1f / %.1f / %.1f mm (%.0f:1, the longest %.0f deg "
+                "from the mean axis); %d blocks of 20 axes: RMS %.0f mm along the axis, %.1f mm across\n",
+                tool, axes.size(), e.inliers.size(), e.rms_distance * 1e3, e.position.x() * 1e3, e.position.y() * 1e3,
+                e.position.z() * 1e3, px.x(), px.y(), inside ? " INSIDE the image" : " outside the image",
+                std::asin(std::min(1.0, e.conditioning)) * 180.0 / M_PI, span, sd(2) * 1e3, sd(1) * 1e3, sd(0) * 1e3,
+                sd(2) / std::max(sd(1), 1e-9), major_to_axis, blocks, blocks ? std::sqrt(along2 / blocks) * 1e3 : 0.0,
+                blocks ? std::sqrt(across2 / blocks) * 1e3 : 0.0);
+  }
+}
+
 // Returns false when a requested regression bound (per sequence) is violated.
 bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp,
                  double min_found, double max_false_per_frame) {
@@ -245,7 +304,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     return true;
   }
   bool ok = true;
-  struct Ann { int frame; Eigen::Vector2d a, b; };
+  struct Ann { int frame, tool; Eigen::Vector2d a, b; };
   std::map<int, std::vector<Ann>> ann;  // per dataset
   std::string line;
   std::getline(csv, line);
@@ -255,7 +314,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::vector<std::string> t;
     while (std::getline(ss, tok, ',')) t.push_back(tok);
     if (t.size() < 7) continue;
-    ann[std::stoi(t[0])].push_back({std::stoi(t[1]), {std::stod(t[3]), std::stod(t[4])}, {std::stod(t[5]), std::stod(t[6])}});
+    std::string const digits = t[2].substr(std::min(t[2].size(), t[2].find_first_of("0123456789")));  // "tool1" -> 1
+    int const tool = digits.empty() ? 0 : std::stoi(digits);
+    ann[std::stoi(t[0])].push_back({std::stoi(t[1]), tool, {std::stod(t[3]), std::stod(t[4])}, {std::stod(t[5]), std::stod(t[6])}});
   }
   for (auto const& [ds, list] : ann) {
     fs::path const video = root / ("Dataset" + std::to_string(ds)) / "Video.avi";
@@ -281,6 +342,8 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::map<int, Eigen::Vector3d> trocar_image;
     PipelineOutput out;
     std::vector<PluckerLine> all_axes;
+    std::map<int, std::vector<PluckerLine>> tool_axes;  // per annotated tool: the 3-D axes of its detections, in time order
+    std::map<int, std::vector<Eigen::Vector3d>> tool_lines;  // ... and their image axes
     while (cap.read(im)) {
       if (im.size() != cv::Size(720, 576)) break;
       out = pipe.process(im);
@@ -326,6 +389,15 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             ++found;
             dist.push_back(best);
             ang.push_back(ba);
+            // Its 3-D axis (the reported instrument on that image axis), for this tool's trocar.
+            for (auto const& o : out.instruments) {
+              Eigen::Vector3d const l = imageAxis(o.contour);
+              if (0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1)))) < 20.0) {
+                tool_axes[a.tool].push_back(o.pose.axis);
+                tool_lines[a.tool].push_back(l);
+                break;
+              }
+            }
           } else if (verbose) {
             std::printf("  miss ds%d frame %d (%s): annotated axis (%.0f %.0f)-(%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
                         a.a.x(), a.a.y(), a.b.x(), a.b.y());
@@ -368,6 +440,31 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                   e.position.x() * 1e3, e.position.y() * 1e3, e.position.z() * 1e3, e.inliers.size(), e.rms_distance * 1e3,
                   std::asin(std::min(1.0, e.conditioning)) * 180 / M_PI, ip.x() / ip.z(), ip.y() / ip.z());
     }
+    std::map<int, std::vector<double>> tool_image_deg;
+    std::map<int, std::vector<Eigen::Vector3d>> annotated_lines;
+    for (auto const& a : list) {
+      tool_image_deg[a.tool].push_back(std::atan2(a.b.y() - a.a.y(), a.b.x() - a.a.x()) * 180.0 / M_PI);
+      Eigen::Vector3d const l = Eigen::Vector3d(a.a.x(), a.a.y(), 1.0).cross(Eigen::Vector3d(a.b.x(), a.b.y(), 1.0));
+      if (l.head<2>().norm() > 1e-9) annotated_lines[a.tool].push_back(l / l.head<2>().norm());
+    }
+    // The image of each tool's trocar as the common point of its image axes (least squares, SVD),
+    // from the annotated axes and from the detected ones: the 2-D check, free of the intrinsics.
+    auto common = [](std::vector<Eigen::Vector3d> const& lines) -> std::string {
+      if (lines.size() < 2) return "too few axes";
+      Eigen::MatrixXd A(lines.size(), 3);
+      for (std::size_t i = 0; i < lines.size(); ++i) A.row(static_cast<Eigen::Index>(i)) = lines[i].transpose();
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
+      Eigen::Vector3d const x = svd.matrixV().col(2);
+      char buf[96];
+      if (std::abs(x.z()) < 1e-9) return "at infinity";
+      std::snprintf(buf, sizeof buf, "(%.0f, %.0f)", x.x() / x.z(), x.y() / x.z());
+      return buf;
+    };
+    for (auto const& [tool, lines] : annotated_lines)
+      std::printf("  tool %d: annotated image axes meet at %s, the detected ones at %s (px)\n", tool, common(lines).c_str(),
+                  tool_lines.count(tool) ? common(tool_lines[tool]).c_str() : "none");
+    std::printf("  each tool's trocar from its own detections' axes (robust Eq. (3); assumed intrinsics as above, 8 mm shafts):\n");
+    reportToolTrocars(tool_axes, tool_image_deg, K, cv::Size(720, 576));
     for (auto const& [id, v] : trocar_track) {
       if (v.size() < 10) continue;
       Eigen::Vector3d m = Eigen::Vector3d::Zero();
