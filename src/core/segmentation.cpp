@@ -271,17 +271,19 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // Candidates with a side found only as the stretch parallel to the other (fitSides(): a
     // shaft merged with a blob near its entry) come last, after the strip search.
     std::vector<Candidate> deferred;
-    // Re-sought candidates, refined last of all: a candidate refused for sides without edges has
-    // them sought again (fitSides(), SideSearch): the shaft's boundary with a grey blob (gauze)
-    // has no edge in the image, its boundary with the tissue beyond the blob has. A re-sought
+    // Re-sought candidates, refined last of all: a candidate refused for sides without edges, or
+    // for sides that diverge from the entry, has them sought again (fitSides(), SideSearch): the
+    // shaft's boundary with a grey blob (gauze) has no edge in the image, its boundary with the
+    // tissue beyond the blob has; a side that ran along the blob leaves the shaft. A re-sought
     // pair (and the region of another seed seen from this one, below) is less certain than a
     // pair followed from the entry: it must be less chromatic than the tissue beside it as a
     // strip with highlights must (max_full_res_ratio, matte or not: a pale tissue fold is matte),
-    // enter clearly across the border (resought_min_entry_sine), and is not remembered as a
-    // parallel pair to try first next frame.
+    // enter clearly across the border (resought_min_entry_sine), end inside the view
+    // (resought_min_tip_depth_px), and is not remembered as a parallel pair to try first next
+    // frame.
     std::vector<Candidate> resought;
-    // The sides of `region` sought again (its pair from the entry had no edges, or none was found
-    // in a region another seed grew): re-sought candidates.
+    // The sides of `region` sought again (its pair from the entry had no edges or diverged, or
+    // none was found in a region another seed grew): re-sought candidates.
     auto reseek = [&](Region const& region, int level) {
       if (params_.contours.min_parallel_side_ratio <= 0.0) return;
       for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
@@ -298,7 +300,10 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, cd.resought ? resought_contours : params_.contours);
         if (f.contour) {
           AcrossSamples const across = acrossContour(bgr, *f.contour);
+          double const off = 0.5 * (scale - 1);
           if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
+          else if (cd.resought && depthAt(fov_, (f.contour->tip_px - Eigen::Vector2d(off, off)) / scale) < params_.resought_min_tip_depth_px)
+            f.rejection = ContourRejection::kTipOnBorder;
           else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
           if (f.rejection != ContourRejection::kNone) f.contour.reset();
         }
@@ -334,6 +339,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         double const score = scoreSides(sf, bgr, params_.contours);
         if (score < 0.0) {
           why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
+          // Two straight sides from the entry that diverge: one follows a blob of the shaft's
+          // level merged with it there (grey tissue, a leak); the shaft's own side is the
+          // stretch of that chain parallel to the other (in-vivo OP1/img_24 found; OP1/img_08
+          // and img_16 found so from an earlier seed, with better lines: 2.31 -> 2.15 px).
+          if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li);
           continue;
         }
         // (not deferred for a shaft that was found so in the last frame: its level is tried first)

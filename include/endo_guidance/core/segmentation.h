@@ -33,6 +33,11 @@ struct SegmentationParams {
   /// ContourLinesParams::min_entry_sine, for these only). Clean rendered scene: 0.1 let a stretch
   /// of a shaft lying along the bottom border through (0.007 -> 0.013 false per frame).
   double resought_min_entry_sine = 0.3;
+  /// ... and end inside the view: the tip at least this far (processing px) from the field of
+  /// view's edge. A band across a corner of the view has both ends on its border (robotic
+  /// Dataset 2's bottom-left corner: 0.11 -> 0.14 false per frame with 0, once the pairs that are
+  /// not near-parallel were sought again).
+  double resought_min_tip_depth_px = 6.0;
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
