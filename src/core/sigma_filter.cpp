@@ -37,9 +37,6 @@ inline std::uint8_t filterPixel(std::uint8_t const* const* rows, int x, int R, i
 
 #if defined(__GNUC__) && defined(__x86_64__)
 #define ENDO_GUIDANCE_AVX2_SIGMA 1
-// The SSE2 loop below on 32 pixels at a time (AVX2, chosen at run time). AVX2's unpack and pack
-// work within each 128-bit half, so the halves go through exactly the SSE2 steps side by side:
-// the same integers, the same exact float division, the same output. Returns the first x not done.
 // The rounded means of 8 pixels (the low or high 16-bit half of each 128-bit half).
 __attribute__((target("avx2"))) inline __m256i mean8(__m256i s16, __m256i n16, bool hi) {
   __m256i const zero = _mm256_setzero_si256();
@@ -50,6 +47,9 @@ __attribute__((target("avx2"))) inline __m256i mean8(__m256i s16, __m256i n16, b
   return _mm256_cvttps_epi32(_mm256_div_ps(num, den));
 }
 
+// The SSE2 loop below on 32 pixels at a time (AVX2, chosen at run time). AVX2's unpack and pack
+// work within each 128-bit half, so the halves go through exactly the SSE2 steps side by side:
+// the same integers, the same exact float division, the same output. Returns the first x not done.
 __attribute__((target("avx2"))) int sigmaRowAvx2(std::uint8_t const* const* rows, std::uint8_t* o, int W, int R, int d) {
   __m256i const dv = _mm256_set1_epi8(static_cast<char>(d));
   __m256i const zero = _mm256_setzero_si256();

@@ -11,7 +11,6 @@
 //   annotated and of its detected image axes, and its 3-D trocar from its detections' axes
 //   (conditioning, elongation, stability over 4-s blocks). No intrinsics are published: assumed.
 #include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -27,6 +26,7 @@
 
 #include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/core/insertion_point.h"
+#include "endo_guidance/core/insertion_point_image.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/pipeline.h"
 #include "tool_util.h"
@@ -335,6 +335,8 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     Pipeline pipe(K, cv::Size(720, 576), pp);
     std::vector<double> ang, dist;
     int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0, false_dets = 0;
+    // Mean distance (px) of an annotated axis's two points to an image axis.
+    auto offAxis = [](Eigen::Vector3d const& l, Ann const& a) { return 0.5 * (std::abs(l.dot(a.a.homogeneous())) + std::abs(l.dot(a.b.homogeneous()))); };
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
@@ -343,7 +345,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     PipelineOutput out;
     std::vector<PluckerLine> all_axes;
     std::map<int, std::vector<PluckerLine>> tool_axes;  // per annotated tool: the 3-D axes of its detections, in time order
-    std::map<int, std::vector<Eigen::Vector3d>> tool_lines;  // ... and their image axes
+    std::map<int, std::vector<ImageLine>> tool_lines;  // ... and their image axes
     while (cap.read(im)) {
       if (im.size() != cv::Size(720, 576)) break;
       out = pipe.process(im);
@@ -362,9 +364,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
         for (auto const& c : r.contours) {
           Eigen::Vector3d const l = imageAxis(c);
           bool near = false;
-          for (auto const& a : it->second)
-            near = near || 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) +
-                                  std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1)))) < 20.0;
+          for (auto const& a : it->second) near = near || offAxis(l, a) < 20.0;
           false_dets += !near;
           if (verbose && !near)
             std::printf("  false ds%d frame %d (%s): entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
@@ -377,7 +377,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
           for (auto const& c : r.contours) {
             // Image axis: the bisector of the two contour lines (their normals point inward).
             Eigen::Vector3d const l = imageAxis(c);
-            double const e = 0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1))));
+            double const e = offAxis(l, a);
             Eigen::Vector2d const dl(-l.y(), l.x());
             double const an = std::acos(std::min(1.0, std::abs(dl.dot(da)))) * 180.0 / M_PI;
             if (e < best) {
@@ -391,8 +391,8 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             ang.push_back(ba);
             // Its 3-D axis (the reported instrument on that image axis), for this tool's trocar.
             for (auto const& o : out.instruments) {
-              Eigen::Vector3d const l = imageAxis(o.contour);
-              if (0.5 * (std::abs(l.dot(Eigen::Vector3d(a.a.x(), a.a.y(), 1))) + std::abs(l.dot(Eigen::Vector3d(a.b.x(), a.b.y(), 1)))) < 20.0) {
+              ImageLine const l = imageAxis(o.contour);
+              if (offAxis(l, a) < 20.0) {
                 tool_axes[a.tool].push_back(o.pose.axis);
                 tool_lines[a.tool].push_back(l);
                 break;
@@ -441,23 +441,21 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                   std::asin(std::min(1.0, e.conditioning)) * 180 / M_PI, ip.x() / ip.z(), ip.y() / ip.z());
     }
     std::map<int, std::vector<double>> tool_image_deg;
-    std::map<int, std::vector<Eigen::Vector3d>> annotated_lines;
+    std::map<int, std::vector<ImageLine>> annotated_lines;
     for (auto const& a : list) {
       tool_image_deg[a.tool].push_back(std::atan2(a.b.y() - a.a.y(), a.b.x() - a.a.x()) * 180.0 / M_PI);
-      Eigen::Vector3d const l = Eigen::Vector3d(a.a.x(), a.a.y(), 1.0).cross(Eigen::Vector3d(a.b.x(), a.b.y(), 1.0));
-      if (l.head<2>().norm() > 1e-9) annotated_lines[a.tool].push_back(l / l.head<2>().norm());
+      if (auto const l = lineThrough(a.a, a.b)) annotated_lines[a.tool].push_back(*l);
     }
-    // The image of each tool's trocar as the common point of its image axes (least squares, SVD),
-    // from the annotated axes and from the detected ones: the 2-D check, free of the intrinsics.
-    auto common = [](std::vector<Eigen::Vector3d> const& lines) -> std::string {
+    // The image of each tool's trocar as the common point of its image axes (Eq. (5), least
+    // squares: its LMedS form, on half of these near-parallel lines, wanders along them), from the
+    // annotated axes and from the detected ones: the 2-D check, free of the intrinsics.
+    auto common = [](std::vector<ImageLine> const& lines) -> std::string {
       if (lines.size() < 2) return "too few axes";
-      Eigen::MatrixXd A(lines.size(), 3);
-      for (std::size_t i = 0; i < lines.size(); ++i) A.row(static_cast<Eigen::Index>(i)) = lines[i].transpose();
-      Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
-      Eigen::Vector3d const x = svd.matrixV().col(2);
+      ImagePointEstimate const e = intersectImageLines(lines, Eigen::Vector2d(359.5, 287.5), 461.0);
+      if (!e.ok) return "no common point";
+      if (e.atInfinity()) return "at infinity";
       char buf[96];
-      if (std::abs(x.z()) < 1e-9) return "at infinity";
-      std::snprintf(buf, sizeof buf, "(%.0f, %.0f)", x.x() / x.z(), x.y() / x.z());
+      std::snprintf(buf, sizeof buf, "(%.0f, %.0f) (rms %.0f px, %zu axes)", e.pixel().x(), e.pixel().y(), e.rms_px, lines.size());
       return buf;
     };
     for (auto const& [tool, lines] : annotated_lines)
