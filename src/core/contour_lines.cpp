@@ -1,5 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/core/contour_lines.h"
+#include "endo_guidance/core/image_reduction.h"
 
 #include <opencv2/core/hal/intrin.hpp>
 #include <cstring>
@@ -775,8 +776,7 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   // blob near the entry (gauze) has one side that is not a straight line from there: that side
   // is then the straight stretch of its chain, up to the point farthest from the seed, that
   // runs parallel beside the other side (parallelSide()); the pair is marked `parallel`.
-  double const off = 0.5 * (scale - 1);
-  auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
+  auto toFull = [&](Eigen::Vector2d const& q) { return toFullRes(q, scale); };
   double const cos_max = std::cos(p.max_angle_deg * M_PI / 180.0);
   // The pair's lines (full resolution) if parallel enough; else the reason.
   auto pairUp = [&](FollowedSide const& a, FollowedSide const& b) -> ContourRejection {
@@ -894,7 +894,6 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   auto const& full = sides.points;
   Eigen::Vector2d const entry = sides.entry, far = sides.far;
   auto const& B = region.boundary;
-  double const off = 0.5 * (scale - 1);
   // Sub-pixel refinement on the full-resolution image, over the extent of the side's inliers
   // (2 px in from each end).
   RefinedLine ref[2];
@@ -956,7 +955,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   double best = -1e300;
   Eigen::Vector2d tip = end;
   for (auto const& q : B) {
-    Eigen::Vector2d const x = Eigen::Vector2d(q.x, q.y) * scale + Eigen::Vector2d(off, off);  // full-res
+    Eigen::Vector2d const x = toFullRes(Eigen::Vector2d(q.x, q.y), scale);
     Eigen::Vector3d const xh(x.x(), x.y(), 1.0);
     if (c.lines[0].dot(xh) < -scale || c.lines[1].dot(xh) < -scale) continue;
     double const t = axis_dir.dot(x - entry);
@@ -987,8 +986,8 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     double const w_proc = std::max(1.0, width_at[0] / scale);
     auto const ax = footOnLine(imageAxis(c), entry);
     int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
-    Eigen::Vector2d const q = walkToEdge(fov, (ax - Eigen::Vector2d(off, off)) / scale, axis_dir, kmax)
-                                  .value_or((entry - Eigen::Vector2d(off, off)) / scale);  // no exit found: the seed
+    Eigen::Vector2d const q = walkToEdge(fov, toProcessing(ax, scale), axis_dir, kmax)
+                                  .value_or(toProcessing(entry, scale));  // no exit found: the seed
     Eigen::Vector2d const g =
         depthGradient(fov, cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))));
     if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);
@@ -1008,7 +1007,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     for (Eigen::Vector2d const& e : {entry, tip})
       for (int k = 0; k < 2; ++k) {
         Eigen::Vector2d const foot = footOnLine(c.lines[k], e);
-        Eigen::Vector2d const ps = (foot - Eigen::Vector2d(off, off)) / scale;  // to processing px
+        Eigen::Vector2d const ps = toProcessing(foot, scale);
         q.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
       }
     std::swap(q[2], q[3]);
@@ -1023,7 +1022,7 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
       std::array<Eigen::Vector2d, 4> const corners{Eigen::Vector2d(entry + nrm * half), Eigen::Vector2d(tip + nrm * half),
                                                     Eigen::Vector2d(tip - nrm * half), Eigen::Vector2d(entry - nrm * half)};
       for (Eigen::Vector2d const& e : corners) {
-        Eigen::Vector2d const ps = (e - Eigen::Vector2d(off, off)) / scale;
+        Eigen::Vector2d const ps = toProcessing(e, scale);
         sp.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
       }
       cv::fillConvexPoly(slab, sp, 255);

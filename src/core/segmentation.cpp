@@ -300,9 +300,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, cd.resought ? resought_contours : params_.contours);
         if (f.contour) {
           AcrossSamples const across = acrossContour(bgr, *f.contour);
-          double const off = 0.5 * (scale - 1);
           if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
-          else if (cd.resought && depthAt(fov_, (f.contour->tip_px - Eigen::Vector2d(off, off)) / scale) < params_.resought_min_tip_depth_px)
+          else if (cd.resought && depthAt(fov_, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
             f.rejection = ContourRejection::kTipOnBorder;
           else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
           if (f.rejection != ContourRejection::kNone) f.contour.reset();
@@ -436,13 +435,13 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     std::vector<cv::Point> strip;
     if (best) {
       ApparentContour const& c = *best_fit.contour;
-      double const off = 0.5 * (scale - 1);
       Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
       for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
         for (int k = 0; k < 2; ++k) {
           Eigen::Vector2d const n = c.lines[k].head<2>();
           Eigen::Vector2d const f = footOnLine(c.lines[k], e) - n * (2.0 * scale);
-          strip.emplace_back(static_cast<int>(std::lround((f.x() - off) / scale)), static_cast<int>(std::lround((f.y() - off) / scale)));
+          Eigen::Vector2d const ps = toProcessing(f, scale);
+          strip.emplace_back(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y())));
         }
       std::swap(strip[2], strip[3]);
     }

@@ -1,5 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/core/strip_search.h"
+#include "endo_guidance/core/image_reduction.h"
 
 #include <algorithm>
 #include <array>
@@ -383,8 +384,7 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
   StripRay const* bb = &pr.b;
   StripCandidate out;
   out.score = pr.score;
-  double const off = 0.5 * (scale - 1);
-  auto toFull = [&](Eigen::Vector2d const& q) { return Eigen::Vector2d(q.x() * scale + off, q.y() * scale + off); };
+  auto toFull = [&](Eigen::Vector2d const& q) { return toFullRes(q, scale); };
   SideFit& sf = out.sides;
   StripRay const* rays[2] = {ba, bb};
   for (int s = 0; s < 2; ++s) {

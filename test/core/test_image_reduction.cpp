@@ -82,3 +82,24 @@ TEST(ImageReduction, EveryFactorGivesTheRoundedBlockMeansAndDropsTheRemainder) {
   EXPECT_THROW(reduceImage(cv::Mat(10, 10, CV_8UC1), 2, bad), cv::Exception);
   EXPECT_THROW(reduceImage(src, 0, bad), cv::Exception);
 }
+
+// A processing pixel maps to the centre of its block at full resolution (toFullRes) and back
+// (toProcessing): the block of reduced pixel (x, y) covers full-resolution columns f x .. f x +
+// f - 1, whose centre is f x + (f - 1) / 2. Checked against reduceImage() itself: the ramp
+// I = x reduces to the ramp's value at the mapped column (within the rounding of a half).
+TEST(ImageReduction, PixelsMapToTheirBlocksCentres) {
+  for (int f : {1, 2, 3, 4, 6}) {
+    for (Eigen::Vector2d const& p : {Eigen::Vector2d(0, 0), Eigen::Vector2d(7, 3), Eigen::Vector2d(2.5, 11.25)}) {
+      Eigen::Vector2d const q = toFullRes(p, f);
+      EXPECT_DOUBLE_EQ(q.x(), f * p.x() + 0.5 * (f - 1));
+      EXPECT_DOUBLE_EQ(q.y(), f * p.y() + 0.5 * (f - 1));
+      EXPECT_LT((toProcessing(q, f) - p).norm(), 1e-12);
+    }
+    cv::Mat ramp(6 * f, 24 * f, CV_8UC3), small;
+    for (int y = 0; y < ramp.rows; ++y)
+      for (int x = 0; x < ramp.cols; ++x) ramp.at<cv::Vec3b>(y, x) = cv::Vec3b::all(static_cast<std::uint8_t>(x));  // (< 256)
+    reduceImage(ramp, f, small);
+    for (int x = 0; x < small.cols; ++x)
+      EXPECT_NEAR(small.at<cv::Vec3b>(2, x)[0], toFullRes(Eigen::Vector2d(x, 2), f).x(), 0.5 + 1e-9) << "f " << f << " x " << x;
+  }
+}

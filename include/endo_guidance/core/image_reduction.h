@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #pragma once
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 namespace endo_guidance::core {
@@ -12,5 +13,17 @@ namespace endo_guidance::core {
 /// f = 1 shares `src`; f = 2 is cv::resize(INTER_AREA), (a + b + c + d + 2) >> 2; other factors
 /// round sum / f^2 to nearest (half up), in one pass.
 void reduceImage(cv::Mat const& src, int f, cv::Mat& dst);
+
+/// A pixel of the image reduced by f (the region stages' processing scale) at full resolution:
+/// the centre of its block, p_full = f p + (f - 1) / 2.
+inline Eigen::Vector2d toFullRes(Eigen::Vector2d const& p, int f) {
+  double const off = 0.5 * (f - 1);
+  return Eigen::Vector2d(p.x() * f + off, p.y() * f + off);
+}
+/// The inverse of toFullRes(): a full-resolution pixel at the processing scale.
+inline Eigen::Vector2d toProcessing(Eigen::Vector2d const& p, int f) {
+  double const off = 0.5 * (f - 1);
+  return (p - Eigen::Vector2d(off, off)) / f;
+}
 
 }  // namespace endo_guidance::core
