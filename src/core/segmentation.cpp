@@ -2,6 +2,7 @@
 #include "endo_guidance/core/segmentation.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <numeric>
@@ -58,9 +59,50 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
   }
   return false;
 }
+
+// Whether a shaft found from a crossing seed (entering the view at an accepted shaft, label
+// `occluder` in `labels`) continues on that shaft's other side, as a shaft passing under or over
+// it does: walking back along its image axis from the entry, the occluder's pixels are met within
+// a few px, and the 4 px beyond them are mostly (3 of 4) inside the view and at or below the
+// growth level. A blob or a jaw beside the occluder ends at it.
+bool continuesBeyond(ApparentContour const& c, cv::Mat const& labels, int occluder, cv::Mat const& feature, FieldOfView const& fov,
+                     int level, int scale) {
+  Eigen::Vector2d const d = (c.entry_px - c.tip_px).normalized();
+  Eigen::Vector2d const e = toProcessing(footOnLine(imageAxis(c), c.entry_px), scale);
+  auto pixel = [&](double t) {
+    Eigen::Vector2d const x = e + t * d;
+    return cv::Point(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
+  };
+  auto inside = [&](cv::Point q) { return q.x >= 0 && q.y >= 0 && q.x < labels.cols && q.y < labels.rows; };
+  int i = 0;
+  for (; i <= 6; ++i) {  // into the occluder
+    cv::Point const q = pixel(i);
+    if (!inside(q)) return false;
+    if (labels.at<std::uint8_t>(q) == occluder) break;
+  }
+  if (i > 6) return false;
+  for (int const end = i + 4 * std::max(labels.cols, labels.rows); i < end; ++i) {  // across it
+    cv::Point const q = pixel(i);
+    if (!inside(q)) return false;
+    if (labels.at<std::uint8_t>(q) != occluder) break;
+  }
+  int low = 0;
+  for (int k = 0; k < 4; ++k) {
+    cv::Point const q = pixel(i + k);
+    low += inside(q) && fov.mask.at<std::uint8_t>(q) && feature.at<std::uint8_t>(q) <= level;
+  }
+  return low >= 3;
+}
 }  // namespace
 
 namespace {
+// A crossing shaft's part beyond the shaft it crosses, seen from that shaft's edge, narrows away
+// from it or keeps its width (perspective alone changes it a little over that part); the false
+// pairs it gave on the hard rendered scene (a jaw, a blob beside a shaft) widened 1.9x.
+constexpr double kCrossingMaxWidening = 1.25;
+// ... and instruments of one radius are about as wide where they cross, at about the same depth
+// (those false pairs were jaws: 0.2x the shaft they lay beside).
+constexpr double kCrossingMinWidthRatio = 0.5;
 // What the stages index or divide by (the YAML loader refuses these with the key's name).
 SegmentationParams const& checked(SegmentationParams const& p) {
   if (p.regions.thresholds.empty()) throw std::invalid_argument("segmentation: no growth thresholds");
@@ -164,15 +206,29 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
   ContourLinesParams resought_contours = params_.contours;
   resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
-  for (int si = 0; si < static_cast<int>(res.seeds.size()); ++si) {
+  // Crossing seeds (crossingSeeds()): after the border's, seeds on the edge of an accepted shaft
+  // that hides part of another; each is searched in the field of view less that shaft's pixels.
+  int const border_seeds = static_cast<int>(res.seeds.size());
+  std::deque<FieldOfView> occluded;  // per occluding shaft searched (stable references)
+  std::vector<int> occluders;        // ... that shaft (index in res.contours)
+  std::vector<int> seed_view;        // per crossing seed: its field of view in `occluded`
+  std::vector<std::vector<cv::Point>> strips;  // per accepted contour: the strip it claimed (processing px)
+  std::vector<int> strip_labels;               // ... and its label in grower_.labels()
+  for (int si = 0;; ++si) {
+    if (si == border_seeds && params_.crossing_seeds && !res.contours.empty())
+      addCrossingSeeds(res, strips, strip_labels, occluded, occluders, seed_view);
+    if (si >= static_cast<int>(res.seeds.size())) break;
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     Seed const& seed = res.seeds[si];
+    bool const crossing = si >= border_seeds;
+    FieldOfView const& view = crossing ? occluded[static_cast<std::size_t>(seed_view[static_cast<std::size_t>(si - border_seeds)])] : fov_;
     // A seed inside a region already refused for another seed (a shaft merged with a grey blob,
     // a vessel or another instrument) would grow that region again; where it enters the view
     // apart from that seed (not on the same stretch of the region's border), its own border run
     // may still start a shaft's sides: that region's sides are sought from this entry (below),
     // and its strip search runs; nothing is grown again.
     bool const claimed = grower_.claimed(seed.position);
+    if (claimed && crossing) continue;
     bool in_refused = false;
     int refused_region = -1;  // the refused region it lies in
     if (claimed && params_.strip.enabled && grower_.labels().at<std::uint8_t>(seed.position) == 255)
@@ -253,7 +309,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // every full_search_every frames its regions are grown first (below) and that strip is the
     // fallback: a shaft found as a strip once (its region leaked then) is not held as a strip
     // for good while growth would give it its region again.
-    bool const strip_first = mem && mem->accepted && mem->strip && params_.strip.enabled &&
+    bool const strip_first = !crossing && mem && mem->accepted && mem->strip && params_.strip.enabled &&
                              mem->age + elapsed < params_.full_search_every;
     if (strip_first) tryStrip(&*mem->strip);
     struct Candidate {
@@ -287,7 +343,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     auto reseek = [&](Region const& region, int level) {
       if (params_.contours.min_parallel_side_ratio <= 0.0) return;
       for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
-        SideFit again = fitSides(region, fov_, scale, params_.contours, search);
+        SideFit again = fitSides(region, view, scale, params_.contours, search);
         if (again.rejection != ContourRejection::kNone) continue;
         double const score = scoreSides(again, bgr, params_.contours);
         if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
@@ -297,13 +353,31 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     auto refineCandidates = [&](std::vector<Candidate>& cands) {
       std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
       for (auto& cd : cands) {
-        ContourFit f = refineContour(cd.sides, cd.region, fov_, bgr, scale, cd.resought ? resought_contours : params_.contours);
+        ContourFit f = refineContour(cd.sides, cd.region, view, bgr, scale, cd.resought ? resought_contours : params_.contours);
         if (f.contour) {
           AcrossSamples const across = acrossContour(bgr, *f.contour);
           if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
-          else if (cd.resought && depthAt(fov_, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
+          else if (cd.resought && depthAt(view, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
             f.rejection = ContourRejection::kTipOnBorder;
           else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
+          else if (crossing) {
+            // A crossing shaft's part beyond the occluder: it narrows or keeps its width away from
+            // it (kCrossingMaxWidening); where they cross the two are at about the same depth,
+            // and of the same radius, so about as wide (at least kCrossingMinWidthRatio of the
+            // occluder); and it goes on on the occluder's other side.
+            int const k = occluders[static_cast<std::size_t>(seed_view[static_cast<std::size_t>(si - border_seeds)])];
+            ApparentContour const& c = *f.contour;
+            ApparentContour const& o = res.contours[static_cast<std::size_t>(k)];
+            Eigen::Vector3d const e = c.entry_px.homogeneous(), t = c.tip_px.homogeneous();
+            Eigen::Vector3d const oe = footOnLine(imageAxis(o), c.entry_px).homogeneous();
+            double const we = c.lines[0].dot(e) + c.lines[1].dot(e);
+            if (c.lines[0].dot(t) + c.lines[1].dot(t) > kCrossingMaxWidening * we)
+              f.rejection = ContourRejection::kWidens;
+            else if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe)))
+              f.rejection = ContourRejection::kTooThin;
+            else if (!continuesBeyond(c, grower_.labels(), strip_labels[static_cast<std::size_t>(k)], filtered_, fov_, T[cd.level], scale))
+              f.rejection = ContourRejection::kNotContinued;
+          }
           if (f.rejection != ContourRejection::kNone) f.contour.reset();
         }
         if (f.contour) {
@@ -334,7 +408,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           smallest_level = li;
         }
         if (r->area < params_.regions.min_area) continue;
-        SideFit sf = fitSides(*r, fov_, scale, params_.contours);
+        SideFit sf = fitSides(*r, view, scale, params_.contours);
         double const score = scoreSides(sf, bgr, params_.contours);
         if (score < 0.0) {
           why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
@@ -347,7 +421,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         }
         // (not deferred for a shaft that was found so in the last frame: its level is tried first)
         bool const defer = sf.parallel && !(tracked && mem->parallel);
-        (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li});
+        // (a crossing seed's pair is checked as a re-sought one: it enters the view at another
+        // shaft, not at the border)
+        (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li, crossing});
         if (!defer && tracked && li == mem_level && score >= 0.85 * mem->score) break;  // as good as before
       }
       refineCandidates(cands);
@@ -398,7 +474,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
     // The region leaked or split at every level: search the shaft's sides from the seed directly
     // in the feature's gradient (strip_search.h), once per seed.
-    bool const strip_run = !best && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
+    bool const strip_run = !best && !crossing && params_.strip.enabled && stripSearchDue(mem, seed, elapsed);
     if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
     while (!best && !resought.empty()) {  // (a re-sought pair is a parallel one: it re-seeks nothing)
@@ -447,6 +523,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
     grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
     if (best) {
+      strips.push_back(strip);
+      strip_labels.push_back(static_cast<int>(res.regions.size()));
       ApparentContour c = *best_fit.contour;
       // Reported on the image axis (the lines' bisector): the seed, the middle of the shaft's
       // border run, is off the axis where the shaft crosses the border obliquely, at a corner or
@@ -480,6 +558,104 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   scale_ = scale;
   since_detection_ = 0;
   return res;
+}
+
+// Crossing seeds ([Doignon07] Sec. 3's 1-D search, along an accepted shaft's edge instead of the
+// border). Only about an accepted shaft that a refused region touches: the part of a crossing
+// shaft on the border's side of it, refused (merged with a blob, or too short alone), is the
+// sign. Along each side of its strip, 1.5 px outside: runs of the feature at or below the seed
+// threshold, at least seeds.min_width long and at most half the side, neither claimed nor at
+// the border (the border's own seeds). Their field of view: fov_ less the shaft's claimed
+// pixels (its edge is their border: fitSides() takes the region's boundary along it for the
+// entry, and the entry checks measure against it).
+void InstrumentSegmenter::addCrossingSeeds(SegmentationResult& res, std::vector<std::vector<cv::Point>> const& strips,
+                                           std::vector<int> const& strip_labels, std::deque<FieldOfView>& views,
+                                           std::vector<int>& view_shafts, std::vector<int>& seed_view) const {
+  cv::Mat const& L = grower_.labels();
+  std::vector<bool> touched(strips.size(), false);
+  for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
+    if (res.region_status[ri] == ContourRejection::kNone) continue;
+    for (cv::Point const& q : res.regions[ri].boundary)
+      for (cv::Point const d : {cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
+        cv::Point const r = q + d;
+        if (r.x < 0 || r.y < 0 || r.x >= L.cols || r.y >= L.rows) continue;
+        int const l = L.at<std::uint8_t>(r);
+        for (std::size_t k = 0; k < strips.size(); ++k) touched[k] = touched[k] || (l != 0 && l == strip_labels[k]);
+      }
+  }
+  int const margin = params_.contours.border_margin + 2;
+  for (std::size_t k = 0; k < strips.size(); ++k) {
+    if (!touched[k] || strips[k].size() != 4) continue;
+    std::vector<Seed> found;
+    // The strip's corners: entry and tip feet of line 0 (0, 3) and of line 1 (1, 2).
+    for (auto const& [a, b, o] : {std::array<int, 3>{0, 3, 1}, std::array<int, 3>{1, 2, 0}}) {
+      Eigen::Vector2d const pa(strips[k][a].x, strips[k][a].y), pb(strips[k][b].x, strips[k][b].y), po(strips[k][o].x, strips[k][o].y);
+      double const len = (pb - pa).norm();
+      if (len < 2.0 * params_.seeds.min_width) continue;
+      Eigen::Vector2d const u = (pb - pa) / len;
+      Eigen::Vector2d nrm(-u.y(), u.x());
+      if (nrm.dot(po - pa) > 0.0) nrm = -nrm;  // away from the other side
+      int const n = static_cast<int>(len);
+      std::vector<int> value(static_cast<std::size_t>(n + 1), -1);  // -1: not searched there
+      std::vector<cv::Point> at(static_cast<std::size_t>(n + 1));
+      std::vector<float> valid;
+      for (int i = 0; i <= n; ++i) {
+        Eigen::Vector2d const x = pa + i * u + 1.5 * nrm;
+        cv::Point const q(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
+        if (q.x < 0 || q.y < 0 || q.x >= filtered_.cols || q.y >= filtered_.rows || !fov_.mask.at<std::uint8_t>(q) ||
+            fov_.depth.at<float>(q) < margin)
+          continue;
+        at[i] = q;
+        value[i] = filtered_.at<std::uint8_t>(q);
+        valid.push_back(static_cast<float>(value[i]));
+        if (grower_.claimed(q)) value[i] = 256;  // searched, not a seed
+      }
+      if (valid.empty()) continue;
+      std::nth_element(valid.begin(), valid.begin() + valid.size() * 3 / 4, valid.end());
+      float const background = valid[valid.size() * 3 / 4];  // the tissue's level beside the shaft
+      for (int i = 0; i <= n;) {
+        if (value[i] < 0 || value[i] > params_.seeds.threshold) {
+          ++i;
+          continue;
+        }
+        int j = i;
+        double sum = 0.0;
+        while (j <= n && value[j] >= 0 && value[j] <= params_.seeds.threshold) sum += value[j++];
+        int const w = j - i;
+        if (w >= params_.seeds.min_width && w <= n / 2) {
+          Seed sd;
+          sd.position = at[(i + j - 1) / 2];
+          sd.width = w;
+          sd.mean_value = static_cast<float>(sum / w);
+          sd.background = background;
+          found.push_back(sd);
+        }
+        i = j;
+      }
+    }
+    if (found.empty()) continue;
+    FieldOfView v;
+    v.mask = fov_.mask.clone();
+    // (dilated by 1 px: the claimed strip's rasterised edge is jagged, and fitSides() looks for
+    // the border at border_margin px straight across; a boundary point on a step of it was
+    // missed, which split the entry)
+    cv::Mat shaft;
+    cv::dilate(L == strip_labels[k], shaft, cv::Mat());
+    v.mask.setTo(0, shaft);
+    cv::Mat dist;
+    cv::distanceTransform(~shaft, dist, cv::DIST_L2, 3);
+    v.depth = cv::min(fov_.depth, dist);
+    v.border = fov_.border;  // (the border's seeds' path: crossing seeds are not searched along it)
+    v.bounds = fov_.bounds;
+    v.circular = fov_.circular;
+    v.centre = fov_.centre;
+    views.push_back(std::move(v));
+    view_shafts.push_back(static_cast<int>(k));
+    for (Seed const& sd : found) {
+      res.seeds.push_back(sd);
+      seed_view.push_back(static_cast<int>(views.size()) - 1);
+    }
+  }
 }
 
 // The memory of the nearest of last frame's seeds within level_memory_px. (Matching a tracked

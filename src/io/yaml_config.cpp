@@ -120,6 +120,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/track_coarse_step_px", d(S.tracking.coarse_step_px)},
       {"segmentation/track_tip_reach_px", d(S.tracking.tip_reach_px)},
       {"segmentation/strip_search", b(S.strip.enabled)},
+      {"segmentation/crossing_seeds", b(S.crossing_seeds)},
       {"segmentation/strip_max_angle_deg", d(S.strip.max_angle_deg)},
       {"segmentation/strip_min_response", d(S.strip.min_response)},
       {"segmentation/strip_min_inside_low", d(S.strip.min_inside_low)},

@@ -96,6 +96,7 @@ void SegmentationNodelet::onInit() {
   c.max_widening = S.contours.max_widening;
   c.max_glare_fraction = S.contours.max_glare_fraction;
   c.strip_search = S.strip.enabled;
+  c.crossing_seeds = S.crossing_seeds;
   c.strip_max_inside_outside_ratio = S.strip.max_inside_outside_ratio;
   c.max_regions = S.regions.max_regions;
   c.detect_every = S.tracking.detect_every;
@@ -151,6 +152,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.contours.max_widening = c.max_widening;
   S.contours.max_glare_fraction = c.max_glare_fraction;
   S.strip.enabled = c.strip_search;
+  S.crossing_seeds = c.crossing_seeds;
   S.strip.max_inside_outside_ratio = c.strip_max_inside_outside_ratio;
   S.regions.max_regions = c.max_regions;
   S.tracking.detect_every = c.detect_every;

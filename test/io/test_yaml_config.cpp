@@ -83,6 +83,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.seeds.dark_border_level, defaults.segmentation.seeds.dark_border_level);
   EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
   EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
+  EXPECT_EQ(shipped.segmentation.crossing_seeds, defaults.segmentation.crossing_seeds);
   EXPECT_EQ(shipped.segmentation.level_memory_px, defaults.segmentation.level_memory_px);
   EXPECT_EQ(shipped.segmentation.full_search_every, defaults.segmentation.full_search_every);
   EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
@@ -99,8 +100,9 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                         &SP::max_specular_fraction})
     EXPECT_EQ(shipped.segmentation.strip.*m, defaults.segmentation.strip.*m);
   PipelineParams off;
-  io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n  strip_search_max_every: 40\n"), off);
+  io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n  strip_search_max_every: 40\n  crossing_seeds: false\n"), off);
   EXPECT_FALSE(off.segmentation.strip.enabled);
+  EXPECT_FALSE(off.segmentation.crossing_seeds);
   EXPECT_EQ(off.segmentation.strip.min_length_ratio, 0.7);
   EXPECT_EQ(off.segmentation.strip_search_max_every, 40);
 }

@@ -76,7 +76,8 @@ struct ContourLinesParams {
 
 enum class ContourRejection {
   kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
-  kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump, kDuplicate, kWidens, kGlare, kTipOnBorder
+  kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump, kDuplicate, kWidens, kGlare, kTipOnBorder,
+  kNotContinued
 };
 char const* toString(ContourRejection r);
 

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <deque>
 #include <optional>
 #include <vector>
 
@@ -38,6 +39,11 @@ struct SegmentationParams {
   /// Dataset 2's bottom-left corner: 0.11 -> 0.14 false per frame with 0, once the pairs that are
   /// not near-parallel were sought again).
   double resought_min_tip_depth_px = 6.0;
+  /// Seeds also on the edge of an accepted shaft that a refused region touches: a shaft crossing
+  /// (or touching) it is cut by its strip, and the part beyond does not reach the field-of-view
+  /// border (the part that does may be merged with a blob, or too short). Searched as the
+  /// border is, in the field of view less that shaft; pairs checked as re-sought ones.
+  bool crossing_seeds = true;
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
@@ -106,6 +112,9 @@ class InstrumentSegmenter {
   };
   Memory const* remembered(Seed const& seed) const;
   bool stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const;
+  void addCrossingSeeds(SegmentationResult& res, std::vector<std::vector<cv::Point>> const& strips,
+                        std::vector<int> const& strip_labels, std::deque<FieldOfView>& views, std::vector<int>& view_shafts,
+                        std::vector<int>& seed_view) const;
   std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
   RegionGrower grower_;
   std::vector<Memory> memory_;
