@@ -523,3 +523,30 @@ TEST(Segmentation, ACrossingBarTooThinOrWideningIsNotAShaft) {
     EXPECT_TRUE(refused) << bottom << " -> " << top << " px";
   }
 }
+
+// A blob (not a shaft) entering from the left border, whose border run is low enough to be a seed
+// only under the relaxed threshold of the arc facing a trocar image (feature about 46: above
+// seed_threshold 40, below seed_near_threshold 55) has no strip search; the same blob darker
+// (feature about 30, a seed under the ordinary threshold) has one. Neither is a shaft.
+TEST(Segmentation, ASeedOnlyUnderTheRelaxedThresholdHasNoStripSearch) {
+  auto blob = [](cv::Scalar const& colour) {
+    cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+    cv::ellipse(im, {0, 240}, {120, 70}, 20.0, 0.0, 360.0, colour, -1, cv::LINE_AA);
+    return im;
+  };
+  ColourFeature const f;
+  EXPECT_GT(f.exact(90, 95, 126), 40.f);
+  EXPECT_LT(f.exact(90, 95, 126), 55.f);
+  EXPECT_LT(f.exact(100, 104, 123), 40.f);
+  std::vector<Eigen::Vector3d> const trocar{Eigen::Vector3d(-400.0, 240.0, 1.0)};  // left of the view
+  auto const relaxed = InstrumentSegmenter().process(blob(cv::Scalar(90, 95, 126)), trocar);
+  auto const ordinary = InstrumentSegmenter().process(blob(cv::Scalar(100, 104, 123)), trocar);
+  ASSERT_FALSE(relaxed.seeds.empty());
+  EXPECT_GT(relaxed.seeds[0].mean_value, 40.f);
+  EXPECT_EQ(relaxed.strip_searches, 0);
+  ASSERT_FALSE(ordinary.seeds.empty());
+  EXPECT_LE(ordinary.seeds[0].mean_value, 40.f);
+  EXPECT_GE(ordinary.strip_searches, 1);
+  EXPECT_TRUE(relaxed.contours.empty());
+  EXPECT_TRUE(ordinary.contours.empty());
+}

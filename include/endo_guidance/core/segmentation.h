@@ -65,6 +65,8 @@ struct SegmentationResult {
   /// The shafts were followed from the last frame's lines (contour_tracking.h), without the
   /// detection: seeds and regions are empty then.
   bool tracked = false;
+  /// Strip searches run this frame (the costliest step: about as much as the rest of a frame).
+  int strip_searches = 0;
 };
 
 /// Instrument segmentation, [Doignon07] Sec. 3: S.H colour feature -> Sigma filter -> seeds along
