@@ -190,10 +190,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   }
   colour_.compute(small_, raw_);
   sigmaFilter(raw_, filtered_, params_.sigma_radius, params_.sigma_delta);
-  // Trocar images in processing pixels: x_small = (x_full - (s - 1)/2) / s.
+  // Trocar images in processing pixels (homogeneous: some lie at infinity).
   std::vector<Eigen::Vector3d> t_small;
-  double const off = 0.5 * (scale - 1);
-  for (auto const& t : trocars) t_small.emplace_back((t.x() - off * t.z()) / scale, (t.y() - off * t.z()) / scale, t.z());
+  for (auto const& t : trocars) t_small.push_back(toProcessing(t, scale));
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
   std::vector<std::size_t> contour_memory;  // per accepted contour: its seed's entry in memory_now
@@ -693,16 +692,18 @@ bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed, int 
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {
-  double const s = r.scale, off = 0.5 * (s - 1);
+  auto full = [&](cv::Point const& q) {  // (the block's centre, truncated to a pixel)
+    Eigen::Vector2d const f = toFullRes(Eigen::Vector2d(q.x, q.y), r.scale);
+    return cv::Point(static_cast<int>(f.x()), static_cast<int>(f.y()));
+  };
   for (std::size_t i = 0; i < r.regions.size(); ++i) {
     bool const ok = r.region_status[i] == ContourRejection::kNone;
     std::vector<cv::Point> pts;
-    for (auto const& q : r.regions[i].boundary) pts.emplace_back(static_cast<int>(q.x * s + off), static_cast<int>(q.y * s + off));
+    for (auto const& q : r.regions[i].boundary) pts.push_back(full(q));
     cv::polylines(img, pts, true, ok ? cv::Scalar(255, 255, 0) : cv::Scalar(0, 0, 255), 1, cv::LINE_AA);
   }
   for (auto const& sd : r.seeds)
-    cv::circle(img, cv::Point(static_cast<int>(sd.position.x * s + off), static_cast<int>(sd.position.y * s + off)), 4,
-               {0, 255, 255}, 1, cv::LINE_AA);
+    cv::circle(img, full(sd.position), 4, {0, 255, 255}, 1, cv::LINE_AA);
   for (auto const& c : r.contours) {
     Eigen::Vector2d const e = c.entry_px, t = c.tip_px;
     for (int k = 0; k < 2; ++k) {

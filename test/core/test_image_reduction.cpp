@@ -94,7 +94,15 @@ TEST(ImageReduction, PixelsMapToTheirBlocksCentres) {
       EXPECT_DOUBLE_EQ(q.x(), f * p.x() + 0.5 * (f - 1));
       EXPECT_DOUBLE_EQ(q.y(), f * p.y() + 0.5 * (f - 1));
       EXPECT_LT((toProcessing(q, f) - p).norm(), 1e-12);
+      for (double w : {1.0, -2.5}) {  // homogeneous, at any scale
+        Eigen::Vector3d const h = toProcessing(Eigen::Vector3d(q.x() * w, q.y() * w, w), f);
+        EXPECT_LT((h.head<2>() / h.z() - p).norm(), 1e-12);
+      }
     }
+    // A point at infinity (a direction) keeps its direction.
+    Eigen::Vector3d const dir = toProcessing(Eigen::Vector3d(3.0, -4.0, 0.0), f);
+    EXPECT_DOUBLE_EQ(dir.z(), 0.0);
+    EXPECT_NEAR(dir.x() * -4.0 - dir.y() * 3.0, 0.0, 1e-12);
     cv::Mat ramp(6 * f, 24 * f, CV_8UC3), small;
     for (int y = 0; y < ramp.rows; ++y)
       for (int x = 0; x < ramp.cols; ++x) ramp.at<cv::Vec3b>(y, x) = cv::Vec3b::all(static_cast<std::uint8_t>(x));  // (< 256)

@@ -25,5 +25,11 @@ inline Eigen::Vector2d toProcessing(Eigen::Vector2d const& p, int f) {
   double const off = 0.5 * (f - 1);
   return (p - Eigen::Vector2d(off, off)) / f;
 }
+/// toProcessing() of a homogeneous point (w = 0: a direction, unchanged up to scale; the trocar
+/// images may lie at infinity).
+inline Eigen::Vector3d toProcessing(Eigen::Vector3d const& p, int f) {
+  double const off = 0.5 * (f - 1);
+  return Eigen::Vector3d((p.x() - off * p.z()) / f, (p.y() - off * p.z()) / f, p.z());
+}
 
 }  // namespace endo_guidance::core
