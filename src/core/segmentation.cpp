@@ -96,13 +96,15 @@ bool continuesBeyond(ApparentContour const& c, cv::Mat const& labels, int occlud
 }  // namespace
 
 namespace {
-// A crossing shaft's part beyond the shaft it crosses, seen from that shaft's edge, narrows away
-// from it or keeps its width (perspective alone changes it a little over that part); the false
-// pairs it gave on the hard rendered scene (a jaw, a blob beside a shaft) widened 1.9x.
-constexpr double kCrossingMaxWidening = 1.25;
-// ... and instruments of one radius are about as wide where they cross, at about the same depth
-// (those false pairs were jaws: 0.2x the shaft they lay beside).
+// Instruments of one radius are about as wide where they cross, at about the same depth (the
+// false pairs crossing seeds gave on the hard rendered scene were jaws: 0.2x the shaft they
+// lay beside).
 constexpr double kCrossingMinWidthRatio = 0.5;
+// A contour's width at its tip over its width at its entry.
+double widening(ApparentContour const& c) {
+  Eigen::Vector3d const e = c.entry_px.homogeneous(), t = c.tip_px.homogeneous();
+  return (c.lines[0].dot(t) + c.lines[1].dot(t)) / std::max(1e-9, c.lines[0].dot(e) + c.lines[1].dot(e));
+}
 // What the stages index or divide by (the YAML loader refuses these with the key's name).
 SegmentationParams const& checked(SegmentationParams const& p) {
   if (p.regions.thresholds.empty()) throw std::invalid_argument("segmentation: no growth thresholds");
@@ -360,20 +362,18 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           else if (cd.resought && depthAt(view, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
             f.rejection = ContourRejection::kTipOnBorder;
           else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
+          else if (cd.resought && widening(*f.contour) > params_.resought_max_widening) f.rejection = ContourRejection::kWidens;
           else if (crossing) {
-            // A crossing shaft's part beyond the occluder: it narrows or keeps its width away from
-            // it (kCrossingMaxWidening); where they cross the two are at about the same depth,
-            // and of the same radius, so about as wide (at least kCrossingMinWidthRatio of the
-            // occluder); and it goes on on the occluder's other side.
+            // A crossing shaft's part beyond the occluder: where they cross the two are at about
+            // the same depth, and of the same radius, so about as wide (at least
+            // kCrossingMinWidthRatio of the occluder); and it goes on on the occluder's other side.
             int const k = occluders[static_cast<std::size_t>(seed_view[static_cast<std::size_t>(si - border_seeds)])];
             ApparentContour const& c = *f.contour;
             ApparentContour const& o = res.contours[static_cast<std::size_t>(k)];
-            Eigen::Vector3d const e = c.entry_px.homogeneous(), t = c.tip_px.homogeneous();
+            Eigen::Vector3d const e = c.entry_px.homogeneous();
             Eigen::Vector3d const oe = footOnLine(imageAxis(o), c.entry_px).homogeneous();
             double const we = c.lines[0].dot(e) + c.lines[1].dot(e);
-            if (c.lines[0].dot(t) + c.lines[1].dot(t) > kCrossingMaxWidening * we)
-              f.rejection = ContourRejection::kWidens;
-            else if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe)))
+            if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe)))
               f.rejection = ContourRejection::kTooThin;
             else if (!continuesBeyond(c, grower_.labels(), strip_labels[static_cast<std::size_t>(k)], filtered_, fov_, T[cd.level], scale))
               f.rejection = ContourRejection::kNotContinued;

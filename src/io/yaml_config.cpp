@@ -115,6 +115,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/strip_search_max_every", i(S.strip_search_max_every)},
       {"segmentation/resought_min_entry_sine", d(S.resought_min_entry_sine)},
       {"segmentation/resought_min_tip_depth_px", d(S.resought_min_tip_depth_px)},
+      {"segmentation/resought_max_widening", d(S.resought_max_widening)},
       {"segmentation/detect_every", i(S.tracking.detect_every)},
       {"segmentation/track_max_width_change", d(S.tracking.max_width_change)},
       {"segmentation/track_coarse_step_px", d(S.tracking.coarse_step_px)},
@@ -171,6 +172,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(S.strip_search_max_every >= 1, "segmentation/strip_search_max_every", ">= 1");
   need(S.resought_min_entry_sine >= 0.0 && S.resought_min_entry_sine <= 1.0, "segmentation/resought_min_entry_sine", "in [0, 1]");
   need(S.resought_min_tip_depth_px >= 0.0, "segmentation/resought_min_tip_depth_px", ">= 0");
+  need(S.resought_max_widening >= 1.0, "segmentation/resought_max_widening", ">= 1");
   need(S.tracking.detect_every >= 1, "segmentation/detect_every", ">= 1");
   need(S.regions.max_regions >= 1, "segmentation/max_regions", ">= 1");
   need(S.seeds.threshold >= 0 && S.seeds.threshold <= 255, "segmentation/seed_threshold", "in [0, 255]");

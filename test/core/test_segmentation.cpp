@@ -516,7 +516,9 @@ TEST(Segmentation, ACrossingBarTooThinOrWideningIsNotAShaft) {
                                          std::tuple<int, int, ContourRejection>{34, 60, ContourRejection::kWidens}}) {
     auto const res = InstrumentSegmenter(sp).process(crossingBars(true, bottom, top));
     EXPECT_EQ(res.contours.size(), 1u) << bottom << " -> " << top << " px";  // A
-    if (!res.contours.empty()) EXPECT_LT(res.contours[0].entry_px.x(), 10.0);
+    if (!res.contours.empty()) {
+      EXPECT_LT(res.contours[0].entry_px.x(), 10.0);
+    }
     bool refused = false;
     for (std::size_t i = 0; i < res.regions.size(); ++i)
       refused |= res.region_status[i] == why && res.regions[i].seed.y < 210;  // seeded on A's upper edge
@@ -549,4 +551,37 @@ TEST(Segmentation, ASeedOnlyUnderTheRelaxedThresholdHasNoStripSearch) {
   EXPECT_GE(ordinary.strip_searches, 1);
   EXPECT_TRUE(relaxed.contours.empty());
   EXPECT_TRUE(ordinary.contours.empty());
+}
+
+// The hard rendered scene through the pipeline, frames 200-283: in frame 283 the left
+// instrument's jaws touch the right shaft's lower side. The right shaft's region seen again from
+// its entry (the region refused for another seed) has its lower side re-sought, and one
+// candidate takes the touching jaws' edge: its lines 53 px off the truth, 1.85x wider at the
+// tip than at the entry. A re-sought pair may widen at most resought_max_widening (1.5): the
+// right shaft is found with both lines within 1 px of the truth; not with the bound at 10.
+TEST(Segmentation, AReSoughtSideOnATouchingInstrumentIsRefusedAsWidening) {
+  HardScene hard;
+  auto error = [&](double max_widening) {
+    PipelineParams pp;
+    pp.segmentation.resought_max_widening = max_widening;
+    Pipeline pipe(hard.options.K, cv::Size(hard.options.width, hard.options.height), pp);
+    double best = 1e9;
+    for (int k = 200; k <= 283; ++k) {
+      auto const views = hard.scene.frame(k);
+      auto const out = pipe.process(hard.renderer.render(views, k));
+      if (k < 283) continue;
+      ApparentContour const& truth = views[1].truth;  // the right shaft
+      EXPECT_GT(truth.entry_px.x(), 630.0);
+      for (auto const& c : out.segmentation.contours) {
+        double e = 0.0;
+        for (int l = 0; l < 2; ++l)
+          for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
+            e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
+        best = std::min(best, e);
+      }
+    }
+    return best;
+  };
+  EXPECT_LT(error(1.5), 1.0);
+  EXPECT_GT(error(10.0), 1.0);
 }

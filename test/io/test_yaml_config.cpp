@@ -53,6 +53,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   for (char const* bad : {"radius: 0\n", "radius: -0.004\n", "segmentation:\n  processing_width: 0\n",
                           "segmentation:\n  sigma_radius: -1\n", "segmentation:\n  detect_every: 0\n", "segmentation:\n  resought_min_entry_sine: 1.5\n",
                           "segmentation:\n  resought_min_tip_depth_px: -1\n",
+                          "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
                           "insertion_points:\n  max_points: -1\n"}) {
@@ -89,6 +90,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
   EXPECT_EQ(shipped.segmentation.resought_min_entry_sine, defaults.segmentation.resought_min_entry_sine);
   EXPECT_EQ(shipped.segmentation.resought_min_tip_depth_px, defaults.segmentation.resought_min_tip_depth_px);
+  EXPECT_EQ(shipped.segmentation.resought_max_widening, defaults.segmentation.resought_max_widening);
   EXPECT_EQ(shipped.segmentation.contours.extend_max_misses, defaults.segmentation.contours.extend_max_misses);
   EXPECT_EQ(shipped.segmentation.tracking.detect_every, defaults.segmentation.tracking.detect_every);
   EXPECT_EQ(shipped.segmentation.tracking.max_width_change, defaults.segmentation.tracking.max_width_change);

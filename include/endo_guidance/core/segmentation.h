@@ -39,6 +39,13 @@ struct SegmentationParams {
   /// Dataset 2's bottom-left corner: 0.11 -> 0.14 false per frame with 0, once the pairs that are
   /// not near-parallel were sought again).
   double resought_min_tip_depth_px = 6.0;
+  /// ... and widen toward the tip at most this much (width at the tip over width at the entry;
+  /// ContourLinesParams::max_widening, 2, for the others). A shaft widens toward its tip only
+  /// when it points toward the camera; a re-sought side can be a neighbour's edge (hard scene
+  /// frame 283: the right shaft's lower side taken from the left instrument's touching jaws,
+  /// 1.85x wider at the tip; the crossing seeds' false pairs, blobs beside a shaft, 1.9x).
+  /// The real data's re-sought and crossing shafts found are unchanged down to 1.25.
+  double resought_max_widening = 1.5;
   /// Seeds also on the edge of an accepted shaft that a refused region touches: a shaft crossing
   /// (or touching) it is cut by its strip, and the part beyond does not reach the field-of-view
   /// border (the part that does may be merged with a blob, or too short). Searched as the
