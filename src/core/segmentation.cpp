@@ -44,21 +44,6 @@ bool onOneBorderRun(Region const& r, FieldOfView const& fov, cv::Point a, cv::Po
   return false;
 }
 
-// Whether contour c lies on one of the shafts already found: its axis within 5 deg of theirs, and
-// its entry and tip (on its axis) within half that shaft's width of their axis. (Two instruments
-// side by side have axes a width apart.)
-bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found) {
-  ImageLine const a = imageAxis(c);
-  Eigen::Vector3d const ce = footOnLine(a, c.entry_px).homogeneous(), ct = footOnLine(a, c.tip_px).homogeneous();
-  for (ApparentContour const& o : found) {
-    ImageLine const b = imageAxis(o);
-    if (std::abs(a.head<2>().dot(b.head<2>())) < std::cos(5.0 * M_PI / 180.0)) continue;
-    Eigen::Vector3d const e = o.entry_px.homogeneous();
-    double const half_width = 0.5 * (o.lines[0].dot(e) + o.lines[1].dot(e));
-    if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
-  }
-  return false;
-}
 
 // Whether a shaft found from a crossing seed (entering the view at an accepted shaft, label
 // `occluder` in `labels`) continues on that shaft's other side, as a shaft passing under or over
@@ -689,6 +674,19 @@ bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed, int 
   int every = std::max(1, params_.full_search_every);
   for (int k = 1; k < m->strip_fails && every < params_.strip_search_max_every; ++k) every *= 2;
   return m->strip_age + elapsed >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));
+}
+
+bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found) {
+  ImageLine const a = imageAxis(c);
+  Eigen::Vector3d const ce = footOnLine(a, c.entry_px).homogeneous(), ct = footOnLine(a, c.tip_px).homogeneous();
+  for (ApparentContour const& o : found) {
+    ImageLine const b = imageAxis(o);
+    if (std::abs(a.head<2>().dot(b.head<2>())) < std::cos(kDuplicateMaxAngleDeg * M_PI / 180.0)) continue;
+    Eigen::Vector3d const e = o.entry_px.homogeneous();
+    double const half_width = 0.5 * (o.lines[0].dot(e) + o.lines[1].dot(e));
+    if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
+  }
+  return false;
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {

@@ -585,3 +585,34 @@ TEST(Segmentation, AReSoughtSideOnATouchingInstrumentIsRefusedAsWidening) {
   EXPECT_LT(error(1.5), 1.0);
   EXPECT_GT(error(10.0), 1.0);
 }
+
+namespace {
+// A contour along p0 -> p1 (entry -> tip) with parallel lines h px either side of its axis.
+ApparentContour bandContour(Eigen::Vector2d const& p0, Eigen::Vector2d const& p1, double h) {
+  Eigen::Vector2d const u = (p1 - p0).normalized(), n(-u.y(), u.x());
+  ApparentContour c;
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Vector2d const q = p0 + (s == 0 ? h : -h) * n;
+    Eigen::Vector3d l(n.x(), n.y(), -n.dot(q));
+    if (l.dot(p0.homogeneous()) < 0.0) l = -l;  // the shaft on the positive side
+    c.lines[s] = l;
+  }
+  c.entry_px = p0;
+  c.tip_px = p1;
+  return c;
+}
+}  // namespace
+
+// duplicatesAShaft(), exact geometry: a shaft 40 px wide along y = 240 from x = 0 to 400. A
+// contour inside its strip (entry and tip within 20 px of its axis) is a second detection of it
+// at 6 deg (hard scene frame 299's stub) or 10 deg off; not one beside it (a width away), nor one
+// crossing it at 30 deg, nor one inside the strip's width at one end only.
+TEST(Segmentation, ASecondDetectionInsideAShaftsStripIsADuplicate) {
+  std::vector<ApparentContour> const found{bandContour({0, 240}, {400, 240}, 20)};
+  double const t6 = std::tan(6.0 * M_PI / 180.0), t10 = std::tan(10.0 * M_PI / 180.0);
+  EXPECT_TRUE(duplicatesAShaft(bandContour({0, 244}, {190, 244 - 190 * t6}, 18), found));
+  EXPECT_TRUE(duplicatesAShaft(bandContour({0, 248}, {100, 248 - 100 * t10}, 18), found));
+  EXPECT_FALSE(duplicatesAShaft(bandContour({0, 280}, {400, 280}, 20), found));  // side by side
+  EXPECT_FALSE(duplicatesAShaft(bandContour({100, 300}, {300, 300 - 200 * std::tan(M_PI / 6)}, 18), found));  // crossing
+  EXPECT_FALSE(duplicatesAShaft(bandContour({0, 244}, {300, 244 - 300 * t6}, 18), found));  // leaves the strip
+}

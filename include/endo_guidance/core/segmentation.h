@@ -135,6 +135,16 @@ class InstrumentSegmenter {
   cv::Mat small_, raw_, filtered_, labels_, gx_, gy_;
 };
 
+/// Whether contour c is a second detection of one of the shafts already found: its entry and tip
+/// (on its axis) within half that shaft's width (at its entry) of that shaft's axis, so that it
+/// lies inside that shaft's image or its extension, and its axis within kDuplicateMaxAngleDeg
+/// of that one. Two instruments side by side have axes a width apart; one crossing another
+/// leaves the other's strip. The angle bound was 5 deg: hard scene frame 299's left shaft,
+/// found beyond the gauze from the gauze's seed, was found again from its own border entry, a
+/// short stub merged with the gauze, 6 deg off, and reported as a second instrument.
+inline constexpr double kDuplicateMaxAngleDeg = 15.0;
+bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found);
+
 /// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image
 /// (seed Fig. 1, 2, 6).
 void drawSegmentationOverlay(cv::Mat& bgr, SegmentationResult const& result,
