@@ -44,7 +44,6 @@ bool onOneBorderRun(Region const& r, FieldOfView const& fov, cv::Point a, cv::Po
   return false;
 }
 
-
 // Whether a shaft found from a crossing seed (entering the view at an accepted shaft, label
 // `occluder` in `labels`) continues on that shaft's other side, as a shaft passing under or over
 // it does: walking back along its image axis from the entry, the occluder's pixels are met within
@@ -192,7 +191,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
   ContourLinesParams resought_contours = params_.contours;
   resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
-  // Crossing seeds (crossingSeeds()): after the border's, seeds on the edge of an accepted shaft
+  // Crossing seeds (addCrossingSeeds()): after the border's, seeds on the edge of an accepted shaft
   // that hides part of another; each is searched in the field of view less that shaft's pixels.
   int const border_seeds = static_cast<int>(res.seeds.size());
   std::deque<FieldOfView> occluded;  // per occluding shaft searched (stable references)

@@ -24,7 +24,27 @@ struct HardScene {
   }();
   SyntheticScene scene{defaultInstruments(), options};
   SceneRenderer renderer{options.width, options.height, hardRenderOptions()};
+  // Frames k0..k1 through the whole pipeline (as endo_guidance_eval_synthetic runs them), each
+  // frame's truth and output handed to `look`.
+  template <class F>
+  void throughPipeline(PipelineParams const& pp, int k0, int k1, F look) {
+    Pipeline pipe(options.K, cv::Size(options.width, options.height), pp);
+    for (int k = k0; k <= k1; ++k) {
+      auto const views = scene.frame(k);
+      look(k, views, pipe.process(renderer.render(views, k)));
+    }
+  }
 };
+
+// The larger distance of contour c's two lines to the true ones, at the feet of c's own entry and
+// tip (over the extent c reports).
+double lineErrorOverItsExtent(ApparentContour const& c, ApparentContour const& truth) {
+  double e = 0.0;
+  for (int l = 0; l < 2; ++l)
+    for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
+      e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
+  return e;
+}
 
 struct Stats {
   int visible = 0, found = 0, false_shafts = 0;
@@ -477,25 +497,16 @@ TEST(Segmentation, TheHardScenesCrossingShaftIsFoundBeyondTheCrossing) {
   auto count = [&](bool crossing_seeds) {
     PipelineParams pp;
     pp.segmentation.crossing_seeds = crossing_seeds;
-    Pipeline pipe(hard.options.K, cv::Size(hard.options.width, hard.options.height), pp);
     int found = 0;
-    for (int k = 200; k <= 273; ++k) {  // (the insertion points are known well before 266)
-      auto const views = hard.scene.frame(k);
-      auto const out = pipe.process(hard.renderer.render(views, k));
-      if (k < 266) continue;
-      ApparentContour const& truth = views[0].truth;  // the left shaft
-      for (auto const& c : out.segmentation.contours) {
-        // Over the extent it reports (its entry and tip).
-        double e = 0.0;
-        for (int l = 0; l < 2; ++l)
-          for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
-            e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
-        if (e < 1.0) {
+    // (the insertion points are known well before frame 266)
+    hard.throughPipeline(pp, 200, 273, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
+      if (k < 266) return;
+      for (auto const& c : out.segmentation.contours)
+        if (lineErrorOverItsExtent(c, views[0].truth) < 1.0) {  // the left shaft
           ++found;
           break;
         }
-      }
-    }
+    });
     return found;
   };
   int const with = count(true), without = count(false);
@@ -564,22 +575,13 @@ TEST(Segmentation, AReSoughtSideOnATouchingInstrumentIsRefusedAsWidening) {
   auto error = [&](double max_widening) {
     PipelineParams pp;
     pp.segmentation.resought_max_widening = max_widening;
-    Pipeline pipe(hard.options.K, cv::Size(hard.options.width, hard.options.height), pp);
     double best = 1e9;
-    for (int k = 200; k <= 283; ++k) {
-      auto const views = hard.scene.frame(k);
-      auto const out = pipe.process(hard.renderer.render(views, k));
-      if (k < 283) continue;
+    hard.throughPipeline(pp, 200, 283, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
+      if (k < 283) return;
       ApparentContour const& truth = views[1].truth;  // the right shaft
       EXPECT_GT(truth.entry_px.x(), 630.0);
-      for (auto const& c : out.segmentation.contours) {
-        double e = 0.0;
-        for (int l = 0; l < 2; ++l)
-          for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
-            e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
-        best = std::min(best, e);
-      }
-    }
+      for (auto const& c : out.segmentation.contours) best = std::min(best, lineErrorOverItsExtent(c, truth));
+    });
     return best;
   };
   EXPECT_LT(error(1.5), 1.0);
