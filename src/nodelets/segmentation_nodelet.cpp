@@ -58,6 +58,11 @@ class SegmentationNodelet : public nodelet::Nodelet {
   ros::Time last_stamp_;
   sensor_msgs::CameraInfo rectified_for_;  // the camera model rectify_ was built for
   std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectify_;
+  // For the diagnostics: the last frame's shafts, and the strip searches (the costliest step)
+  // over the frames since the last report.
+  std::mutex diag_mutex_;
+  int last_shafts_ = 0;
+  std::size_t diag_frames_ = 0, diag_strip_searches_ = 0;
 };
 
 void SegmentationNodelet::onInit() {
@@ -77,6 +82,12 @@ void SegmentationNodelet::onInit() {
   double expected_rate = 0.0;
   pnh_.param("expected_rate", expected_rate, 0.0);
   monitor_ = std::make_unique<ros_io::FrameMonitor>(nh_, pnh_, "segmentation", expected_rate);
+  monitor_->setExtra([this](diagnostic_updater::DiagnosticStatusWrapper& s) {
+    std::lock_guard<std::mutex> lock(diag_mutex_);
+    s.add("shafts (last frame)", last_shafts_);
+    s.addf("strip searches per frame", "%.2f", diag_frames_ ? static_cast<double>(diag_strip_searches_) / diag_frames_ : 0.0);
+    diag_frames_ = diag_strip_searches_ = 0;
+  });
 
   // Live tuning starts from the loaded values, not the .cfg defaults.
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<SegmentationConfig>>(reconfigure_mutex_, pnh_);
@@ -202,6 +213,12 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
   }
   last_stamp_ = image->header.stamp;
   core::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
+  {
+    std::lock_guard<std::mutex> lock(diag_mutex_);
+    last_shafts_ = static_cast<int>(seg.contours.size());
+    ++diag_frames_;
+    diag_strip_searches_ += static_cast<std::size_t>(seg.strip_searches);
+  }
   std::vector<core::ApparentContour> contours = seg.contours;
   // Lens distortion: refit the lines to the rectified edge points.
   if (ros_io::hasDistortion(*info)) {

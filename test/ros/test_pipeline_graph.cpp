@@ -186,6 +186,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   tf2_ros::TransformListener listener(buffer);
   int const frames = 220;
   int matched_contours = 0, all_contours = 0, truth_views = 0, axes_seen = 0;
+  std::size_t last_shafts = 0;
   double worst_axis_deg = 0.0;
   std::vector<double> axis_errors;
   for (int k = 0; k < frames; ++k) {
@@ -196,6 +197,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
     auto const a = axes_.get();
     ASSERT_TRUE(c && c->header.stamp == t && c->header.frame_id == kFrame);
     ASSERT_TRUE(a && a->header.stamp == t);
+    last_shafts = c->contours.size();
     // Every reported contour is one of the true shafts (lines within 1.5 px at the ends).
     for (auto const& m : c->contours) {
       ASSERT_TRUE(finite({m.lines[0].a, m.lines[0].b, m.lines[0].c, m.lines[1].a, m.lines[1].b, m.lines[1].c, m.residual_px}));
@@ -255,6 +257,9 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
     found += best < 0.003;
   }
   EXPECT_EQ(found, 3);
+  // The segmentation's diagnostics: the last frame's shafts and the strip searches per frame.
+  EXPECT_TRUE(diagnosticsSay("shafts (last frame)=" + std::to_string(last_shafts)));
+  EXPECT_TRUE(diagnosticsSay("strip searches per frame="));
 }
 
 TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {
