@@ -29,6 +29,7 @@
 #include "endo_guidance/core/insertion_point_image.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/pipeline.h"
+#include "hough_baseline.h"
 #include "tool_util.h"
 #include "endo_guidance/core/segmentation.h"
 
@@ -38,6 +39,7 @@ namespace io = endo_guidance::io;
 
 namespace {
 
+using endo_guidance::tools::detectShaftsHough;
 using endo_guidance::tools::percentile;
 
 // The quadrilateral between the two contour lines from the entry to the tip.
@@ -60,6 +62,7 @@ struct InvivoStats {
 };
 
 bool verbose = false;
+bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
 
 struct InvivoChecks {
   double min_found = -1.0, max_line_px = -1.0, max_false_per_image = -1.0;
@@ -88,7 +91,13 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     }
     ++st.images;
     InstrumentSegmenter seg(sp);  // stills: no temporal state
-    SegmentationResult const r = seg.process(im);
+    SegmentationResult r = seg.process(im);
+    if (baseline) {
+      r.contours = detectShaftsHough(im);
+      r.regions.clear();
+      r.region_status.clear();
+      r.seeds.clear();
+    }
     // The field of view at full resolution, less 3 px at its edge.
     cv::Mat inner_fov;
     cv::resize(seg.fieldOfView().mask, inner_fov, im.size(), 0, 0, cv::INTER_NEAREST);
@@ -175,7 +184,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       if (found.count(id)) continue;
       cv::Mat dil;
       cv::dilate(whole[id], dil, cv::Mat(), {-1, -1}, 12);
-      std::string why = "no seed";
+      std::string why = baseline ? "not found by the baseline" : "no seed";
       for (std::size_t k = 0; k < r.regions.size(); ++k) {
         // The region (scaled to full resolution) lies mostly on this instrument.
         std::vector<cv::Point> poly;
@@ -190,7 +199,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
           break;
         }
       }
-      if (why == "no seed")
+      if (why == "no seed" && !baseline)
         for (auto const& sd : r.seeds) {
           cv::Point const q(static_cast<int>(sd.position.x * sc + so), static_cast<int>(sd.position.y * sc + so));
           if (dil.at<std::uint8_t>(q)) why = "seed without region";
@@ -508,6 +517,7 @@ int main(int argc, char** argv) {
     else if (a == "--min-area" && i + 1 < argc) min_area = std::atoi(argv[++i]);
     else if (a == "--invivo-only") robotic = false;
     else if (a == "--verbose") verbose = true;
+    else if (a == "--baseline") baseline = true;
     else if (a == "--min-found" && i + 1 < argc) chk.min_found = std::atof(argv[++i]);
     else if (a == "--max-line-px" && i + 1 < argc) chk.max_line_px = std::atof(argv[++i]);
     else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
@@ -517,6 +527,7 @@ int main(int argc, char** argv) {
     else if (a == "--robotic-max-false-per-frame" && i + 1 < argc) robotic_max_false = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
+                           "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
                            "       [--robotic-min-found F] [--robotic-max-false-per-frame F]   (per robotic sequence; exit 1 if violated)\n"
                            "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
@@ -538,6 +549,10 @@ int main(int argc, char** argv) {
   }
   SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
+  if (baseline && robotic) {
+    std::printf("--baseline: the in-vivo stills only (the baseline has no insertion points for the sequences)\n");
+    robotic = false;
+  }
   if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk);
   if (robotic) ok = evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp, robotic_min_found, robotic_max_false) && ok;
   return ok ? 0 : 1;
