@@ -18,6 +18,7 @@
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/sigma_filter.h"
 #include "endo_guidance/core/strip_search.h"
+#include "hough_baseline.h"
 #include "ratio_reporter.h"
 
 using namespace endo_guidance::core;
@@ -81,10 +82,9 @@ void BM_Pipeline(benchmark::State& st) {
 // timed apart, so that both see the same phase of a noisy machine; `ratio` is the sum of the
 // pipeline times over the sum of the HSV times (the figure the README quotes). The ratios of
 // separate benchmarks (above) moved by up to 40 % between runs here, the paired one by a few %.
-void pairedWithHSV(benchmark::State& st, PipelineParams const& params) {
-  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
-  Pipeline p(f.K, f.images[0].size(), params);
-  for (auto const& im : f.images) p.process(im);  // warm: insertion points, levels
+// `process(frame)` is the method timed against the conversion.
+template <class Process>
+void pairedWithHSV(benchmark::State& st, Frames const& f, Process&& process) {
   cv::Mat hsv;
   double t_hsv = 0.0, t_pipe = 0.0;
   std::size_t i = 0;
@@ -96,7 +96,7 @@ void pairedWithHSV(benchmark::State& st, PipelineParams const& params) {
     cv::Mat const& im = f.images[i++ % f.images.size()];
     if (!hsv_first) {
       auto const t0 = Clock::now();
-      benchmark::DoNotOptimize(p.process(im));
+      process(im);
       t_pipe += us(t0, Clock::now());
     }
     auto const t1 = Clock::now();
@@ -105,7 +105,7 @@ void pairedWithHSV(benchmark::State& st, PipelineParams const& params) {
     t_hsv += us(t1, Clock::now());
     if (hsv_first) {
       auto const t2 = Clock::now();
-      benchmark::DoNotOptimize(p.process(im));
+      process(im);
       t_pipe += us(t2, Clock::now());
     }
   }
@@ -115,14 +115,28 @@ void pairedWithHSV(benchmark::State& st, PipelineParams const& params) {
   st.counters["ratio"] = t_hsv > 0.0 ? t_pipe / t_hsv : 0.0;
 }
 
-void BM_PipelinePairedWithHSV(benchmark::State& st) { pairedWithHSV(st, PipelineParams{}); }
+void pipelinePairedWithHSV(benchmark::State& st, PipelineParams const& params) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  Pipeline p(f.K, f.images[0].size(), params);
+  for (auto const& im : f.images) p.process(im);  // warm: insertion points, levels
+  pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(p.process(im)); });
+}
+
+void BM_PipelinePairedWithHSV(benchmark::State& st) { pipelinePairedWithHSV(st, PipelineParams{}); }
+
+// The plain OpenCV baseline (Canny + Hough on chroma; src/tools/hough_baseline.h), for
+// comparison: it finds shafts only, no pose or insertion points.
+void BM_HoughBaselinePairedWithHSV(benchmark::State& st) {
+  auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
+  pairedWithHSV(st, f, [](cv::Mat const& im) { benchmark::DoNotOptimize(endo_guidance::tools::detectShaftsHough(im)); });
+}
 
 // The same with contour tracking between detection frames (detect_every 4: a speed mode, not the
 // default; see contour_tracking.h).
 void BM_PipelineTrackingPairedWithHSV(benchmark::State& st) {
   PipelineParams p;
   p.segmentation.tracking.detect_every = 4;
-  pairedWithHSV(st, p);
+  pipelinePairedWithHSV(st, p);
 }
 
 void BM_Stage_Resize(benchmark::State& st) {
@@ -195,6 +209,7 @@ BENCHMARK(BM_HSV)->Apply(sizes);
 BENCHMARK(BM_Pipeline)->Apply(sizes);
 BENCHMARK(BM_PipelinePairedWithHSV)->Apply(sizes);
 BENCHMARK(BM_PipelineTrackingPairedWithHSV)->Apply(sizes);
+BENCHMARK(BM_HoughBaselinePairedWithHSV)->Apply(sizes);
 BENCHMARK(BM_Stage_Resize)->Apply(sizes);
 BENCHMARK(BM_Stage_ColourFeature)->Apply(sizes);
 BENCHMARK(BM_Stage_SigmaFilter)->Apply(sizes);
