@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -82,6 +83,7 @@ struct Result {
   int cut = 0, cut_found = 0;  // shafts with a contour line (nearly) out of view, and those found
   std::vector<double> line_px, dir_deg, dist_rel, trocar_mm, latency_ms;
   std::vector<double> hsv_ratio;  // --baseline: its cost over one HSV conversion, per frame
+  std::vector<std::vector<double>> trocar_after_100;  // per instrument: nearest estimate's error (mm) in each frame from 100 on
   std::vector<std::array<double, 3>> by_length;  // visible length (px), direction (deg), distance (relative) per found shaft
 };
 
@@ -191,6 +193,17 @@ Result run(Scene const& s, int frames, bool overlay, bool verbose, PipelineParam
       for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
       drawSegmentationOverlay(ov, out.segmentation, ti);
       cv::imwrite("eval_" + s.name + ".png", ov);
+    }
+    if (!baseline && k >= 100) {
+      // The estimates' stability: their error in every frame from the 100th (the issue's "after
+      // 100 frames"), not only in the last.
+      R.trocar_after_100.resize(scene.size());
+      for (std::size_t i = 0; i < scene.size(); ++i) {
+        double best = std::numeric_limits<double>::infinity();
+        for (auto const& p : out.insertion_points)
+          best = std::min(best, (p.estimate.position - scene.meanTrocar(static_cast<int>(i))).norm() * 1e3);
+        R.trocar_after_100[i].push_back(best);
+      }
     }
     if (k == frames - 1 && baseline)
       // Least squares (Eq. (3), no weights) on the inliers of a least-median-of-squares search
@@ -308,6 +321,10 @@ int main(int argc, char** argv) {
     if (verbose) {
       std::printf("  %s: %d of %d visible shafts found, %d of %d with a line cut off; %d false in %d frames\n", s.name.c_str(), r.found,
                   r.visible, r.cut_found, r.cut, r.false_shafts, r.frames);
+      for (std::size_t i = 0; i < r.trocar_after_100.size(); ++i)
+        std::printf("  %s: trocar %zu over frames 100-%d: nearest estimate off the true mean by %.2f mm (median), %.2f (p95), %.2f (max)\n",
+                    s.name.c_str(), i, r.frames - 1, percentile(r.trocar_after_100[i], 0.5), percentile(r.trocar_after_100[i], 0.95),
+                    percentile(r.trocar_after_100[i], 1.0));
       // The axis is found from the convergence of the two lines: its direction (and so its
       // distance) error grows fast as the visible shaft gets shorter.
       for (auto const& [lo, hi] : {std::pair{0.0, 150.0}, std::pair{150.0, 300.0}, std::pair{300.0, 1e9}}) {
