@@ -1,23 +1,54 @@
 #!/usr/bin/env bash
-# The offline program on a short rendered sequence with one unreadable frame: one JSON object per
-# frame, the bad frame reported (stderr and "error") and skipped, the run goes on, and the
-# insertion points appear; bad arguments fail with a message.
+# The offline program on a short rendered sequence with an unreadable frame and one of the wrong
+# size: one JSON object per frame, the bad frames reported (stderr and "error") and skipped, the
+# run goes on, and the insertion points appear; the same frames as a video (overlay as a video);
+# a bag; bad arguments fail with a message.
 set -euo pipefail
 BIN="$1"
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
 "$BIN/endo_guidance_synthetic" --write-sequence "$T/seq" --frames 120 >/dev/null
+# A video of the first 40 frames (before they are spoilt below): read with cv::VideoCapture,
+# the overlay written as a video of as many frames.
+/usr/bin/python3 - "$T/seq/frames" "$T/seq.avi" <<'PY'
+import glob, sys, cv2
+files = sorted(glob.glob(sys.argv[1] + "/*.png"))[:40]
+w = cv2.VideoWriter(sys.argv[2], cv2.VideoWriter_fourcc(*"MJPG"), 25, (640, 480))
+for f in files:
+    w.write(cv2.imread(f))
+w.release()
+PY
+"$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" --radius 0.004 --output "$T/video.jsonl" \
+  --overlay "$T/ov.avi" --quiet "$T/seq.avi"
+/usr/bin/python3 - "$T/video.jsonl" "$T/ov.avi" <<'PY'
+import json, sys, cv2
+rows = [json.loads(l) for l in open(sys.argv[1])]
+assert len(rows) == 40, len(rows)
+assert all(r["source"] == sys.argv[1].replace("video.jsonl", "seq.avi") + "#%d" % k for k, r in enumerate(rows)), rows[0]["source"]
+assert not any("error" in r for r in rows)
+assert sum(len(r["instruments"]) for r in rows) > 60
+cap = cv2.VideoCapture(sys.argv[2])
+n = 0
+while cap.read()[0]:
+    n += 1
+assert n == 40, n
+print("offline video ok:", len(rows), "frames in,", n, "overlay frames out")
+PY
 echo "not a png" > "$T/seq/frames/000050.png"
+# A frame of the wrong size: reported and skipped too.
+/usr/bin/python3 -c "import cv2, sys; cv2.imwrite(sys.argv[1], cv2.resize(cv2.imread(sys.argv[1]), (320, 240)))" "$T/seq/frames/000060.png"
 "$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" --radius 0.004 --output "$T/out.jsonl" \
   --overlay "$T/ov" --quiet "$T/seq/frames" 2> "$T/err.txt"
 grep -q "frame 50 .*unreadable image -- skipped" "$T/err.txt"
+grep -q "frame 60 .*image size 320x240 differs from the camera's 640x480 -- skipped" "$T/err.txt"
 /usr/bin/python3 - "$T/out.jsonl" <<'PY'
 import json, math, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
 assert len(rows) == 120, len(rows)
 assert [r["frame"] for r in rows] == list(range(120))
 bad = [r for r in rows if "error" in r]
-assert len(bad) == 1 and bad[0]["frame"] == 50, bad
+assert [r["frame"] for r in bad] == [50, 60], bad
+assert "320x240" in bad[1]["error"], bad[1]
 good = [r for r in rows if "error" not in r]
 assert sum(len(r["instruments"]) for r in good) > 150
 for r in good:
@@ -28,7 +59,7 @@ for r in good:
 assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
 print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts")
 PY
-test "$(ls "$T/ov" | wc -l)" -eq 119
+test "$(ls "$T/ov" | wc -l)" -eq 118
 # A bag (sensor_msgs/Image + camera_info beside it, stamps since the epoch): its camera_info is
 # used without --camera, and each frame keeps its own stamp.
 /usr/bin/python3 - "$T/seq/frames" "$T/seq.bag" <<'PY'
