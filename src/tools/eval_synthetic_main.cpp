@@ -10,10 +10,10 @@
 // field of view over >= 40 px; shafts lying along the border with a line cut off are counted
 // apart (cut(found)) and do not enter the figures. --check exits 1 unless the targets
 // (issue "Instrument segmentation and the offline pipeline") are met. --baseline measures the
-// issue's plain OpenCV baseline (hough_baseline.h) on the same frames instead, its trocars by
+// issue's plain OpenCV baseline (hough_baseline.h) on the same frames instead: its trocars by
 // least squares on the inliers of a least-median-of-squares search over the axes matched to each
-// instrument (the truth does the grouping), and its
-// cost as a ratio to cv::cvtColor(BGR->HSV) of each frame.
+// instrument (the truth does the grouping), its cost as a ratio to cv::cvtColor(BGR->HSV) of
+// each frame.
 #include <algorithm>
 #include <array>
 #include <chrono>

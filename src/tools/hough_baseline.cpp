@@ -126,19 +126,20 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
       T0 = std::min(T0, t0);
       T1 = std::max(T1, t1);
       // Least-squares refit on the Canny edge pixels near the side.
-      std::vector<cv::Point2f> pts;
-      cv::Mat taken = cv::Mat::zeros(edges.size(), CV_8U);
+      std::vector<int> idx;  // edge pixels (y * cols + x) within the band, each once
       Eigen::Vector2d const n = side[s]->line.head<2>();
       for (double t = t0; t <= t1; t += 1.0)
         for (double o = -std::ceil(p.refit_band_px); o <= std::ceil(p.refit_band_px); o += 1.0) {
           Eigen::Vector2d const q = at(*side[s], a, t) + o * n;
           int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-          if (x < 0 || y < 0 || x >= edges.cols || y >= edges.rows || !edges.at<std::uint8_t>(y, x) || taken.at<std::uint8_t>(y, x))
-            continue;
+          if (x < 0 || y < 0 || x >= edges.cols || y >= edges.rows || !edges.at<std::uint8_t>(y, x)) continue;
           if (std::abs(dist(side[s]->line, Eigen::Vector2d(x, y))) > p.refit_band_px) continue;
-          taken.at<std::uint8_t>(y, x) = 1;
-          pts.emplace_back(static_cast<float>(x), static_cast<float>(y));
+          idx.push_back(y * edges.cols + x);
         }
+      std::sort(idx.begin(), idx.end());
+      idx.erase(std::unique(idx.begin(), idx.end()), idx.end());
+      std::vector<cv::Point2f> pts;
+      for (int k : idx) pts.emplace_back(static_cast<float>(k % edges.cols), static_cast<float>(k / edges.cols));
       if (pts.size() < 10) {
         ok = false;
         break;
