@@ -18,11 +18,6 @@ struct Segment {
   double len;
 };
 
-ImageLine lineThrough(Eigen::Vector2d const& p, Eigen::Vector2d const& d) {
-  Eigen::Vector2d const n(-d.y(), d.x());
-  return ImageLine(n.x(), n.y(), -n.dot(p));
-}
-
 double dist(ImageLine const& l, Eigen::Vector2d const& q) { return l.head<2>().dot(q) + l.z(); }
 
 // The chroma at pixel q (nearest), or -1 outside the image.
@@ -65,7 +60,7 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
     s.len = (s.p1 - s.p0).norm();
     if (s.len < 1.0) continue;
     s.d = (s.p1 - s.p0) / s.len;
-    s.line = lineThrough(s.p0, s.d);
+    s.line = *core::lineThrough(s.p0, s.p1);  // (|p1 - p0| >= 1)
     seg.push_back(s);
   }
   double const cos_max = std::cos(p.max_pair_angle_deg * M_PI / 180.0);
@@ -146,7 +141,8 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
       }
       cv::Vec4f f;
       cv::fitLine(pts, f, cv::DIST_L2, 0, 0.01, 0.01);
-      fitted[s] = lineThrough(Eigen::Vector2d(f[2], f[3]), Eigen::Vector2d(f[0], f[1]).normalized());
+      Eigen::Vector2d const c(f[2], f[3]);
+      fitted[s] = *core::lineThrough(c, c + Eigen::Vector2d(f[0], f[1]));  // (fitLine's direction is a unit vector)
     }
     if (!ok) continue;
     // Normals toward the other side.
