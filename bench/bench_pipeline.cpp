@@ -78,11 +78,11 @@ void BM_Pipeline(benchmark::State& st) {
   }
 }
 
-// The same, paired: every iteration converts the frame to HSV and runs the pipeline on it, each
-// timed apart, so that both see the same phase of a noisy machine; `ratio` is the sum of the
-// pipeline times over the sum of the HSV times (the figure the README quotes). The ratios of
-// separate benchmarks (above) moved by up to 40 % between runs here, the paired one by a few %. `method_us`: the time per frame of the method paired with the conversion.
-// `process(frame)` is the method timed against the conversion.
+// The same, paired: every iteration converts the frame to HSV and runs the method on it
+// (`process(frame)`: the pipeline, or the baseline), each timed apart, so that both see the same
+// phase of a noisy machine; `ratio` is the sum of the method's times (`method_us` per frame) over
+// the sum of the HSV times (the figure the README quotes). The ratios of separate benchmarks
+// (above) moved by up to 40 % between runs here, the paired one by a few %.
 template <class Process>
 void pairedWithHSV(benchmark::State& st, Frames const& f, Process&& process) {
   cv::Mat hsv;
