@@ -21,7 +21,7 @@ struct Segment {
 double dist(ImageLine const& l, Eigen::Vector2d const& q) { return l.head<2>().dot(q) + l.z(); }
 
 // The chroma at pixel q (nearest), or -1 outside the image.
-int chromaAt(cv::Mat const& chroma, Eigen::Vector2d const& q) {
+int chromaNear(cv::Mat const& chroma, Eigen::Vector2d const& q) {
   int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
   if (x < 0 || y < 0 || x >= chroma.cols || y >= chroma.rows) return -1;
   return chroma.at<std::uint8_t>(y, x);
@@ -87,7 +87,7 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
       for (double t = lo; t <= hi; t += 3.0) {
         Eigen::Vector2d const xa = at(A, a, t), xb = at(B, a, t);
         Eigen::Vector2d const u = (xb - xa).normalized();
-        int const ci = chromaAt(chroma, 0.5 * (xa + xb)), ca = chromaAt(chroma, xa - 4.0 * u), cb = chromaAt(chroma, xb + 4.0 * u);
+        int const ci = chromaNear(chroma, 0.5 * (xa + xb)), ca = chromaNear(chroma, xa - 4.0 * u), cb = chromaNear(chroma, xb + 4.0 * u);
         if (ci >= 0) in.push_back(ci);
         if (ca >= 0) outA.push_back(ca);
         if (cb >= 0) outB.push_back(cb);
@@ -160,9 +160,9 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
     // One shaft once: a pair about the axis of one found already (the specular stripe's edges,
     // an edge split by Hough) is not another shaft.
     bool dup = false;
+    Eigen::Vector2d const m = 0.5 * (e0 + e1);
     for (auto const& o : out) {
       ImageLine const oa = core::imageAxis(o);
-      Eigen::Vector2d const m = 0.5 * (e0 + e1);
       dup |= std::abs(oa.head<2>().dot(axis.head<2>())) >= cos_max && std::abs(dist(oa, m)) < p.duplicate_px;
     }
     if (dup) continue;

@@ -30,9 +30,9 @@ struct HoughBaselineParams {
 /// Shafts found by the baseline: Canny + probabilistic Hough on the chroma (max - min) image,
 /// pairs of near-parallel segments around a grey strip, each side refitted by least squares on
 /// the Canny edge pixels near it; a strip must start at the image border (instruments enter
-/// across it: the baseline knows no field of view). Lines in ApparentContour order and orientation (left side
-/// first walking from the entry, normals toward the shaft); the entry is the strip's end nearer
-/// the image border. No residuals or covariances.
+/// across it: the baseline knows no field of view). Lines in ApparentContour order and
+/// orientation (left side first walking from the entry, normals toward the shaft); the entry is
+/// the strip's end nearer the image border. No residuals or covariances.
 std::vector<core::ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaselineParams const& p = {});
 
 }  // namespace endo_guidance::tools
