@@ -37,21 +37,29 @@ int maxDiff(cv::Mat const& a, cv::Mat const& b) {
 }  // namespace
 
 TEST(ImageReduction, HalvingEqualsOpenCVAreaResamplingBitForBit) {
-  // Widths with and without a SIMD tail (16 output pixels per step), and a submatrix (row stride).
-  for (auto const& wh : {cv::Size(640, 480), cv::Size(720, 576), cv::Size(38, 10), cv::Size(2, 2), cv::Size(66, 6)}) {
-    cv::Mat const src = randomImage(wh.width, wh.height, wh.width);
+  // Both code paths: the AVX2 one where the CPU has it, and OpenCV's resampling (optimisations
+  // off). Widths with and without a SIMD tail (8 output pixels per step, the last 10 by the
+  // scalar row), too narrow for a step, and a submatrix (row stride, bytes past the row's end).
+  for (bool const optimised : {true, false}) {
+    cv::setUseOptimized(optimised);
+    for (auto const& wh : {cv::Size(640, 480), cv::Size(720, 576), cv::Size(38, 10), cv::Size(2, 2), cv::Size(66, 6),
+                           cv::Size(20, 4), cv::Size(22, 4), cv::Size(36, 2), cv::Size(1922, 6)}) {
+      cv::Mat const src = randomImage(wh.width, wh.height, wh.width);
+      cv::Mat ref, got;
+      cv::resize(src, ref, wh / 2, 0, 0, cv::INTER_AREA);
+      reduceImage(src, 2, got);
+      ASSERT_EQ(got.size(), ref.size());
+      EXPECT_EQ(maxDiff(got, ref), 0) << wh << (optimised ? " optimised" : " plain");
+      EXPECT_EQ(maxDiff(got, blockMeans(src, 2)), 0) << wh;
+    }
+    cv::Mat const big = randomImage(700, 300, 7);
+    cv::Mat const roi = big(cv::Rect(3, 5, 642, 290));
     cv::Mat ref, got;
-    cv::resize(src, ref, wh / 2, 0, 0, cv::INTER_AREA);
-    reduceImage(src, 2, got);
-    ASSERT_EQ(got.size(), ref.size());
-    EXPECT_EQ(maxDiff(got, ref), 0) << wh;
+    cv::resize(roi, ref, roi.size() / 2, 0, 0, cv::INTER_AREA);
+    reduceImage(roi, 2, got);
+    EXPECT_EQ(maxDiff(got, ref), 0);
   }
-  cv::Mat const big = randomImage(700, 300, 7);
-  cv::Mat const roi = big(cv::Rect(3, 5, 642, 290));
-  cv::Mat ref, got;
-  cv::resize(roi, ref, roi.size() / 2, 0, 0, cv::INTER_AREA);
-  reduceImage(roi, 2, got);
-  EXPECT_EQ(maxDiff(got, ref), 0);
+  cv::setUseOptimized(true);
 }
 
 TEST(ImageReduction, EveryFactorGivesTheRoundedBlockMeansAndDropsTheRemainder) {
