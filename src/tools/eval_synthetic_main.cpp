@@ -91,7 +91,8 @@ double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-Result run(Scene const& s, int frames, bool overlay, bool verbose, PipelineParams const& pp, bool baseline) {
+Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& overlay_frames, bool verbose, PipelineParams const& pp,
+           bool baseline) {
   SyntheticSceneOptions so;
   so.breathing_amplitude = s.breathing;
   SyntheticScene scene(defaultInstruments(), so);
@@ -187,12 +188,13 @@ Result run(Scene const& s, int frames, bool overlay, bool verbose, PipelineParam
       R.false_reported += ok ? 0 : 1;
       if (k >= 100) R.false_late += ok ? 0 : 1;
     }
-    if (overlay && k == frames - 1) {
+    bool const listed = std::find(overlay_frames.begin(), overlay_frames.end(), k) != overlay_frames.end();
+    if ((overlay && k == frames - 1) || (listed && !baseline)) {
       cv::Mat ov = img.clone();
       std::vector<Eigen::Vector3d> ti;
       for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
       drawSegmentationOverlay(ov, out.segmentation, ti);
-      cv::imwrite("eval_" + s.name + ".png", ov);
+      cv::imwrite("eval_" + s.name + (listed ? "_" + std::to_string(k) : std::string()) + ".png", ov);
     }
     if (!baseline && k >= 100) {
       // The estimates' stability: their error in every frame from the 100th (the issue's "after
@@ -246,6 +248,7 @@ int main(int argc, char** argv) {
   int frames = 300;
   bool check = false, overlay = false, verbose = false, baseline = false;
   std::vector<std::string> only;
+  std::vector<int> overlay_frames;  // --overlay-frame K (repeatable): eval_SCENE_K.png
   std::string params_path;
   // Regression bounds per scene (SCENE=VALUE, repeatable): exit 1 when one is violated.
   struct Bound {
@@ -264,6 +267,7 @@ int main(int argc, char** argv) {
     if (a == "--frames" && i + 1 < argc) frames = std::atoi(argv[++i]);
     else if (a == "--check") check = true;
     else if (a == "--overlay") overlay = true;
+    else if (a == "--overlay-frame" && i + 1 < argc) overlay_frames.push_back(std::atoi(argv[++i]));
     else if (a == "--verbose") verbose = true;
     else if (a == "--baseline") baseline = true;
     else if (a == "--scene" && i + 1 < argc) only.push_back(argv[++i]);
@@ -275,6 +279,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: endo_guidance_eval_synthetic [--frames N] [--scene clean|hard|black_circular]... [--overlay] [--check]\n"
+                   "       [--overlay-frame K]...   (also write frame K's overlay, eval_SCENE_K.png)\n"
                    "       [--baseline]   (the issue's Canny + Hough baseline instead of the pipeline)\n"
                    "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n"
                    "       [--min-found SCENE=PCT] [--max-false SCENE=PER_FRAME] [--max-line-p95 SCENE=PX] [--max-trocar SCENE=MM]\n"
@@ -308,7 +313,7 @@ int main(int argc, char** argv) {
               "line p95", "dir p50", "dist p50", "trocar", "late fp", "latency ms", "frames", "cut(found)");
   for (auto const& s : scenes) {
     if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
-    Result const r = run(s, frames, overlay && !baseline, verbose, pp, baseline);
+    Result const r = run(s, frames, overlay && !baseline, overlay_frames, verbose, pp, baseline);
     double const found = 100.0 * r.found / std::max(1, r.visible);
     double const fpf = static_cast<double>(r.false_shafts) / std::max(1, r.frames);
     double const tro = percentile(r.trocar_mm, 1.0);

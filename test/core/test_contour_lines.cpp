@@ -102,8 +102,9 @@ TEST(ContourLines, FastChromaSamplerMatchesTheScalarOne) {
   ContourLinesParams scalar = fast;
   scalar.brightness_fallback_contrast = 1e9;  // the scalar sampler; the fallback itself never fires
   for (ContourLinesParams* p : {&fast, &scalar}) p->refine_halfwidth_px = p->coarse_halfwidth_px = 6.0;  // to x = 118.x
-  // Both fast samplers: two samples per step where the CPU has AVX2, one (SSE2) without it or
-  // with OpenCV's optimisations off.
+  // Both fast samplers: eight samples per step where the CPU has AVX2 (25 per profile: three
+  // steps, an overlapping last one, and steps near x = 118 that take the scalar sampler), one
+  // (SSE2) without it or with OpenCV's optimisations off.
   for (bool optimised : {true, false}) {
     cv::setUseOptimized(optimised);
     auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
