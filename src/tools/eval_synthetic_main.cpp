@@ -195,6 +195,13 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
       drawSegmentationOverlay(ov, out.segmentation, ti);
       cv::imwrite("eval_" + s.name + (listed ? "_" + std::to_string(k) : std::string()) + ".png", ov);
+      if (verbose && listed) {
+        std::printf("  regions %s frame %d:", s.name.c_str(), k);
+        for (std::size_t i = 0; i < out.segmentation.regions.size(); ++i)
+          std::printf(" %s(t%d,a%d)", toString(out.segmentation.region_status[i]), out.segmentation.regions[i].threshold,
+                      out.segmentation.regions[i].area);
+        std::printf("\n");
+      }
     }
     if (!baseline && k >= 100) {
       // The estimates' stability: their error in every frame from the 100th (the issue's "after
@@ -279,7 +286,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: endo_guidance_eval_synthetic [--frames N] [--scene clean|hard|black_circular]... [--overlay] [--check]\n"
-                   "       [--overlay-frame K]...   (also write frame K's overlay, eval_SCENE_K.png)\n"
+                   "       [--overlay-frame K]...   (also write frame K's overlay, eval_SCENE_K.png; with --verbose its regions)\n"
                    "       [--baseline]   (the issue's Canny + Hough baseline instead of the pipeline)\n"
                    "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n"
                    "       [--min-found SCENE=PCT] [--max-false SCENE=PER_FRAME] [--max-line-p95 SCENE=PX] [--max-trocar SCENE=MM]\n"
