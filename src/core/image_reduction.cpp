@@ -60,11 +60,6 @@ void halveRow(std::uint8_t const* r0, std::uint8_t const* r1, std::uint8_t* out,
     }
 }
 
-// Each 128-bit lane takes 12 bytes (4 pixels, 2 output pixels) of a row: pshufb puts each
-// channel's horizontal pair side by side, maddubs adds the pairs in 16 bits (<= 510), the two
-// rows are added, +2 >> 2, packed. 8 output pixels per step from 4 lanes; every load and store
-// is 16 bytes, 4 past the bytes used, so the loop stops 10 output pixels before the row's end
-// and the scalar row finishes it. Exact: the same integer sums as cv::resize's INTER_AREA path.
 // One row's horizontal pair sums of 4 chunks (12 input bytes, 6 output bytes each) from r, in
 // lanes a = (chunk 0, chunk 2), b = (chunk 1, chunk 3): packed, the lanes then hold chunks 0, 1
 // and 2, 3 in order.
@@ -73,6 +68,11 @@ __attribute__((target("avx2"))) inline void pairSums(std::uint8_t const* r, __m2
   a = _mm256_maddubs_epi16(_mm256_shuffle_epi8(_mm256_loadu2_m128i(at(24), at(0)), pairs), ones);
   b = _mm256_maddubs_epi16(_mm256_shuffle_epi8(_mm256_loadu2_m128i(at(36), at(12)), pairs), ones);
 }
+// Each 128-bit lane takes 12 bytes (4 pixels, 2 output pixels) of a row: pshufb puts each
+// channel's horizontal pair side by side, maddubs adds the pairs in 16 bits (<= 510), the two
+// rows are added, +2 >> 2, packed. 8 output pixels per step from 4 lanes; every load and store
+// is 16 bytes, 4 past the bytes used, so the loop stops 10 output pixels before the row's end
+// and the scalar row finishes it. Exact: the same integer sums as cv::resize's INTER_AREA path.
 __attribute__((target("avx2"))) void halveAvx2(cv::Mat const& src, cv::Mat& dst) {
   int const W = dst.cols;
   __m256i const pairs = _mm256_broadcastsi128_si256(_mm_setr_epi8(0, 3, 1, 4, 2, 5, 6, 9, 7, 10, 8, 11, -1, -1, -1, -1));
@@ -100,8 +100,9 @@ __attribute__((target("avx2"))) void halveAvx2(cv::Mat const& src, cv::Mat& dst)
 
 }  // namespace
 
-void reduceImage(cv::Mat const& src, int f, cv::Mat& dst) {
-  CV_Assert(src.type() == CV_8UC3 && f >= 1 && f <= 255);  // (16-bit row sums)
+void reduceImage(cv::Mat const& source, int f, cv::Mat& dst) {
+  CV_Assert(source.type() == CV_8UC3 && f >= 1 && f <= 255);  // (16-bit row sums)
+  cv::Mat const src = source;  // (a reference to the data, kept should dst be the same Mat: in place)
   if (f == 1) dst = src;
   // Halving, (a + b + c + d + 2) >> 2: with AVX2 (chosen at run time), pairs side by side by
   // pshufb, 4-5x faster than OpenCV's area resampling (scalar for 3 channels: 115-190 us at

@@ -62,6 +62,16 @@ TEST(ImageReduction, HalvingEqualsOpenCVAreaResamplingBitForBit) {
   cv::setUseOptimized(true);
 }
 
+TEST(ImageReduction, InPlaceGivesTheSameAsIntoAnotherImage) {
+  for (int f : {2, 3, 7}) {
+    cv::Mat m = randomImage(100, 40, f);
+    cv::Mat const expected = blockMeans(m, f);
+    reduceImage(m, f, m);
+    ASSERT_EQ(m.size(), expected.size()) << f;
+    EXPECT_EQ(maxDiff(m, expected), 0) << f;
+  }
+}
+
 TEST(ImageReduction, EveryFactorGivesTheRoundedBlockMeansAndDropsTheRemainder) {
   cv::Mat const src = randomImage(101, 47, 3);  // odd sizes: the last columns and rows are dropped
   for (int f : {2, 3, 4, 5, 6, 7, 8, 9}) {

@@ -10,8 +10,9 @@ namespace endo_guidance::core {
 /// the rounded mean of an f x f block (the last cols % f columns and rows % f rows are dropped,
 /// so that x_small = (x_full - (f - 1) / 2) / f holds everywhere: cv::resize of an odd-sized
 /// image to half its size spreads the blocks instead, and takes OpenCV's slow general path).
-/// f = 1 shares `src`; f = 2 is cv::resize(INTER_AREA), (a + b + c + d + 2) >> 2; other factors
-/// round sum / f^2 to nearest (half up), in one pass.
+/// f = 1 shares `src`; f = 2 is cv::resize(INTER_AREA)'s (a + b + c + d + 2) >> 2 (with AVX2 by
+/// pshufb, bit for bit); other factors round sum / f^2 to nearest (half up), in one pass. `dst`
+/// may be `src` (in place).
 void reduceImage(cv::Mat const& src, int f, cv::Mat& dst);
 
 /// A pixel of the image reduced by f (the region stages' processing scale) at full resolution:
