@@ -128,12 +128,13 @@ inline std::int32_t load4(std::uint8_t const* q) {
   std::memcpy(&v, q, 4);
   return v;
 }
-// The 4 bytes at base + off[k] in lane k (B, G, R, -), and channel ch (0 B, 1 G, 2 R) of each
-// as a float. (Eight loads and inserts: AVX2's gather instruction made the sampler slower here.)
-__attribute__((target("avx2"))) inline __m256i gather4(char const* base, int const* off) {
+// The 4 bytes at base + off[k] in lane k (B, G, R, -): eight loads and inserts (AVX2's gather
+// instruction made the sampler slower here).
+__attribute__((target("avx2"))) inline __m256i cornerLanes(char const* base, int const* off) {
   auto const q = [base](int o) { return load4(reinterpret_cast<std::uint8_t const*>(base + o)); };
   return _mm256_setr_epi32(q(off[0]), q(off[1]), q(off[2]), q(off[3]), q(off[4]), q(off[5]), q(off[6]), q(off[7]));
 }
+// Channel ch (0 B, 1 G, 2 R) of each lane of cornerLanes() as a float.
 __attribute__((target("avx2"))) inline __m256 channel(__m256i q, int ch, __m256i mask) {
   return _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(q, 8 * ch), mask));
 }
@@ -174,8 +175,8 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
     __m256i const off = _mm256_add_epi32(_mm256_mullo_epi32(y0, vstride), _mm256_mullo_epi32(x0, three));
     alignas(32) int offs[8];
     _mm256_store_si256(reinterpret_cast<__m256i*>(offs), off);
-    __m256i const q00 = gather4(base, offs), q01 = gather4(base + 3, offs), q10 = gather4(base + stride, offs),
-                  q11 = gather4(base + stride + 3, offs);
+    __m256i const q00 = cornerLanes(base, offs), q01 = cornerLanes(base + 3, offs), q10 = cornerLanes(base + stride, offs),
+                  q11 = cornerLanes(base + stride + 3, offs);
     __m256 const ofx = _mm256_sub_ps(one, fx), ofy = _mm256_sub_ps(one, fy);
     __m256 mx, mn;
     for (int ch = 0; ch < 3; ++ch) {
