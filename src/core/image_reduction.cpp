@@ -51,7 +51,8 @@ void boxMeans(cv::Mat const& src, int factor, cv::Mat& dst) {
 
 #if defined(__GNUC__) && defined(__x86_64__)
 #define ENDO_GUIDANCE_AVX2_HALVING 1
-// One output row of the halving, (a + b + c + d + 2) >> 2 per channel, from input rows r0, r1.
+// The halving of output pixels x..W-1 of one row (the SIMD loop's tail), (a + b + c + d + 2) >> 2
+// per channel, from input rows r0, r1.
 void halveRow(std::uint8_t const* r0, std::uint8_t const* r1, std::uint8_t* out, int x, int W) {
   for (; x < W; ++x)
     for (int ch = 0; ch < 3; ++ch) {
