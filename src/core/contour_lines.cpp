@@ -106,8 +106,9 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
   return out;
 }
 
-// Bilinear sample of the chroma of a BGR image at (x, y); false outside.
-bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value = nullptr) {
+// Bilinear sample of the edge channel (edgeChannel(), red-green weight w) of a BGR image at
+// (x, y); false outside.
+bool chromaAt(cv::Mat const& bgr, double x, double y, float w, float* out, float* value = nullptr) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
   int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
@@ -116,7 +117,7 @@ bool chromaAt(cv::Mat const& bgr, double x, double y, float* out, float* value =
   float c[3];
   for (int k = 0; k < 3; ++k)
     c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
-  *out = ColourFeature::chroma(c[0], c[1], c[2]);
+  *out = edgeChannel(c[0], c[1], c[2], w);
   if (value) *value = std::max(c[0], std::max(c[1], c[2]));
   return true;
 }
@@ -145,9 +146,9 @@ __attribute__((target("avx2"))) inline __m256 channel(__m256i q, int ch, __m256i
 // sample whose loads would pass the end of its row (the last two columns) takes chromaAt(), as
 // does a profile shorter than 8 samples. The last step overlaps the one before.
 __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d,
-                                                      int count, float* out) {
+                                                      int count, float w, float* out) {
   if (count < 8) {
-    for (int i = 0; i < count; ++i) chromaAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), &out[i]);
+    for (int i = 0; i < count; ++i) chromaAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), w, &out[i]);
     return;
   }
   int const stride = static_cast<int>(bgr.step[0]);
@@ -165,7 +166,7 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
     __m128i const yi_lo = _mm256_cvttpd_epi32(y_lo), yi_hi = _mm256_cvttpd_epi32(y_hi);
     __m256i const x0 = _mm256_set_m128i(xi_hi, xi_lo), y0 = _mm256_set_m128i(yi_hi, yi_lo);
     if (!_mm256_testz_si256(_mm256_cmpgt_epi32(x0, x_last), _mm256_cmpgt_epi32(x0, x_last))) {
-      for (int k = i; k < i + 8; ++k) chromaAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), &out[k]);
+      for (int k = i; k < i + 8; ++k) chromaAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), w, &out[k]);
       continue;
     }
     __m256 const fx = _mm256_set_m128(_mm256_cvtpd_ps(_mm256_sub_pd(x_hi, _mm256_cvtepi32_pd(xi_hi))),
@@ -178,15 +179,19 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
     __m256i const q00 = cornerLanes(base, offs), q01 = cornerLanes(base + 3, offs), q10 = cornerLanes(base + stride, offs),
                   q11 = cornerLanes(base + stride + 3, offs);
     __m256 const ofx = _mm256_sub_ps(one, fx), ofy = _mm256_sub_ps(one, fy);
-    __m256 mx, mn;
+    __m256 mx, mn, c[3];
     for (int ch = 0; ch < 3; ++ch) {
       __m256 const v = _mm256_add_ps(
           _mm256_mul_ps(ofy, _mm256_add_ps(_mm256_mul_ps(ofx, channel(q00, ch, mask)), _mm256_mul_ps(fx, channel(q01, ch, mask)))),
           _mm256_mul_ps(fy, _mm256_add_ps(_mm256_mul_ps(ofx, channel(q10, ch, mask)), _mm256_mul_ps(fx, channel(q11, ch, mask)))));
+      c[ch] = v;
       mx = ch == 0 ? v : _mm256_max_ps(mx, v);
       mn = ch == 0 ? v : _mm256_min_ps(mn, v);
     }
-    _mm256_storeu_ps(out + i, _mm256_sub_ps(mx, mn));
+    // edgeChannel(), its operations in its order.
+    __m256 const e = _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(1.f - w), _mm256_sub_ps(mx, mn)),
+                                   _mm256_mul_ps(_mm256_set1_ps(w * kRedGreenScale), _mm256_sub_ps(c[2], c[1])));
+    _mm256_storeu_ps(out + i, e);
   }
 }
 #endif
@@ -199,9 +204,9 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
 // two columns) takes chromaAt(). On a CPU with AVX2 (and OpenCV's optimisations on:
 // cv::setUseOptimized()), eight samples per step (sampleChromaAvx2()), the same results. perf on
 // a 640x480 frame: the sampler's share 14 % with two samples per step, 11 % with eight.
-void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out) {
+void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float w, float* out) {
 #ifdef ENDO_GUIDANCE_AVX2_SAMPLER
-  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleChromaAvx2(bgr, a, d, count, out);
+  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleChromaAvx2(bgr, a, d, count, w, out);
 #endif
   std::size_t const stride = bgr.step[0];
   std::uint8_t const* const data = bgr.data;
@@ -212,7 +217,7 @@ void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d 
     double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
     int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
     if (x0 > x_last) {
-      chromaAt(bgr, x, y, &out[i]);
+      chromaAt(bgr, x, y, w, &out[i]);
       continue;
     }
     cv::v_float32x4 const fx = cv::v_setall_f32(static_cast<float>(x - x0)), fy = cv::v_setall_f32(static_cast<float>(y - y0));
@@ -221,7 +226,8 @@ void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d 
     cv::v_float32x4 const c = (one - fy) * ((one - fx) * corner(p0) + fx * corner(p0 + 3)) +
                               fy * ((one - fx) * corner(p1) + fx * corner(p1 + 3));  // B, G, R, -
     cv::v_float32x4 const c1 = cv::v_rotate_right<1>(c), c2 = cv::v_rotate_right<2>(c);  // G, R, ... and R, ...
-    out[i] = (cv::v_max(c, cv::v_max(c1, c2)) - cv::v_min(c, cv::v_min(c1, c2))).get0();
+    float const chroma = (cv::v_max(c, cv::v_max(c1, c2)) - cv::v_min(c, cv::v_min(c1, c2))).get0();
+    out[i] = (1.f - w) * chroma + (w * kRedGreenScale) * (c2.get0() - c1.get0());  // edgeChannel()
   }
 }
 
@@ -308,7 +314,8 @@ class EdgeProfiler {
   EdgeProfiler(cv::Mat const& bgr, ContourLinesParams const& p)
       : bgr_(bgr), p_(p), h_(p.refine_halfwidth_px), ds_(p.profile_step_px),
         ns_(static_cast<int>(std::lround(2.0 * h_ / ds_)) + 1), prof_(static_cast<std::size_t>(ns_)),
-        val_(static_cast<std::size_t>(ns_)), need_value_(p.brightness_fallback_contrast > 0.0) {}
+        val_(static_cast<std::size_t>(ns_)), need_value_(p.brightness_fallback_contrast > 0.0),
+        w_(static_cast<float>(p.edge_red_green_weight)) {}
 
   // The edge on the profile across `line` at t along its direction (-b, a); nullopt when the
   // profile leaves the image or has no edge steeper than min_edge_contrast.
@@ -326,10 +333,10 @@ class EdgeProfiler {
     if (need_value_) {
       for (int i = 0; i < ns_; ++i) {
         Eigen::Vector2d const q = base + (-h_ + i * ds_) * n;
-        chromaAt(bgr_, q.x(), q.y(), &prof_[i], &val_[i]);
+        chromaAt(bgr_, q.x(), q.y(), w_, &prof_[i], &val_[i]);
       }
     } else {
-      sampleChroma(bgr_, a, ds_ * n, ns_, prof_.data());
+      sampleChroma(bgr_, a, ds_ * n, ns_, w_, prof_.data());
     }
     // The edge is located in chroma, where the shaded rim of a grey shaft does not bias it (metal
     // mirrors tissue colours, so it is the steepest descent, not the first seen from inside --
@@ -348,6 +355,7 @@ class EdgeProfiler {
   int const ns_;
   std::vector<float> prof_, val_;
   bool const need_value_;
+  float const w_;  // edgeChannel()'s red-green weight
 };
 
 // The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
@@ -1122,7 +1130,7 @@ std::optional<ApparentContour> rectifyContour(ApparentContour const& contour,
   return out;
 }
 
-AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& c) {
+AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& c, float w) {
   CV_Assert(bgr.type() == CV_8UC3);
   AcrossSamples s;
   Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
@@ -1130,8 +1138,8 @@ AcrossSamples acrossContour(cv::Mat const& bgr, ApparentContour const& c) {
     int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
     if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
     cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
-    v.push_back(ColourFeature::chroma(px[0], px[1], px[2]));
-    if (inside && std::max({px[0], px[1], px[2]}) >= 230 && v.back() < 30.f) ++s.glare;
+    v.push_back(edgeChannel(px[0], px[1], px[2], w));
+    if (inside && std::max({px[0], px[1], px[2]}) >= 230 && ColourFeature::chroma(px[0], px[1], px[2]) < 30.f) ++s.glare;
   };
   for (int i = 1; i < 40; ++i) {
     Eigen::Vector2d const m = e + (i / 40.0) * ax;
@@ -1149,7 +1157,7 @@ bool mostlyGlare(AcrossSamples const& s, ContourLinesParams const& p) {
 }
 
 bool mostlyGlare(cv::Mat const& bgr, ApparentContour const& contour, ContourLinesParams const& p) {
-  return mostlyGlare(acrossContour(bgr, contour), p);
+  return mostlyGlare(acrossContour(bgr, contour, static_cast<float>(p.edge_red_green_weight)), p);
 }
 
 }  // namespace endo_guidance::core

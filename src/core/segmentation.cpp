@@ -125,7 +125,7 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
     TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
     // Lost, no longer less chromatic than the tissue beside it, or now glare: this is a detection frame.
     if (!r.shaft) return std::nullopt;
-    AcrossSamples const across = acrossContour(bgr, r.shaft->contour);
+    AcrossSamples const across = acrossContour(bgr, r.shaft->contour, edgeWeight());
     if (!stripContrastFullRes(across, params_.strip) || mostlyGlare(across, params_.contours)) return std::nullopt;
     now.push_back(std::move(*r.shaft));
   }
@@ -276,7 +276,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
       }
       if (f.contour) {
-        AcrossSamples const across = acrossContour(bgr, *f.contour);
+        AcrossSamples const across = acrossContour(bgr, *f.contour, edgeWeight());
         if (!stripContrastFullRes(across, params_.strip)) f.rejection = ContourRejection::kLowContrast;
         else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
         if (f.rejection != ContourRejection::kNone) f.contour.reset();
@@ -341,7 +341,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       for (auto& cd : cands) {
         ContourFit f = refineContour(cd.sides, cd.region, view, bgr, scale, cd.resought ? resought_contours : params_.contours);
         if (f.contour) {
-          AcrossSamples const across = acrossContour(bgr, *f.contour);
+          AcrossSamples const across = acrossContour(bgr, *f.contour, edgeWeight());
           if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
           else if (cd.resought && depthAt(view, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
             f.rejection = ContourRejection::kTipOnBorder;

@@ -427,8 +427,8 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
   return true;
 }
 
-bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p) {
-  return stripContrastFullRes(acrossContour(bgr, c), p);
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p, float w) {
+  return stripContrastFullRes(acrossContour(bgr, c, w), p);
 }
 
 bool stripContrastFullRes(AcrossSamples s, StripSearchParams const& p) {

@@ -104,6 +104,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/extend_max_misses", i(S.contours.extend_max_misses)},
       {"segmentation/extend_gate_px", d(S.contours.extend_gate_px)},
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
+      {"segmentation/edge_red_green_weight", d(S.contours.edge_red_green_weight)},
       {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
       {"segmentation/min_fill", d(S.contours.min_fill)},
       {"segmentation/min_parallel_side_ratio", d(S.contours.min_parallel_side_ratio)},

@@ -82,6 +82,7 @@ struct Result {
   int false_reported = 0;  // reported instruments (after attachment) that match no shaft, all frames
   int cut = 0, cut_found = 0;  // shafts with a contour line (nearly) out of view, and those found
   std::vector<double> line_px, dir_deg, dist_rel, trocar_mm, latency_ms;
+  std::vector<double> dist_signed, line_signed;  // (estimate - truth) / truth; line offset outward (px) at mid-shaft
   std::vector<double> hsv_ratio;  // --baseline: its cost over one HSV conversion, per frame
   std::vector<std::vector<double>> trocar_after_100;  // per instrument: nearest estimate's error (mm) in each frame from 100 on
   std::vector<std::array<double, 3>> by_length;  // visible length (px), direction (deg), distance (relative) per found shaft
@@ -155,11 +156,17 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       ++R.found;
       auto const& c = out.segmentation.contours[best];
       for (int l = 0; l < 2; ++l) R.line_px.push_back(lineError(c.lines[l], v.truth.lines[l], v.truth.entry_px, v.truth.tip_px));
+      for (int l = 0; l < 2; ++l) {
+        Eigen::Vector2d const mid = 0.5 * (footOnLine(v.truth.lines[l], v.truth.entry_px) + footOnLine(v.truth.lines[l], v.truth.tip_px));
+        Eigen::Vector3d const e = c.lines[l] / c.lines[l].head<2>().norm();
+        R.line_signed.push_back(e.dot(mid.homogeneous()));
+      }
       auto const pose = estimateCylinderPose(so.K, v.radius, c);
       if (pose.ok()) {
         R.dir_deg.push_back(std::atan2(pose.pose.axis.direction().cross(v.axis.direction()).norm(),
                                        pose.pose.axis.direction().dot(v.axis.direction())) * 180.0 / M_PI);
         R.dist_rel.push_back(std::abs(pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
+        R.dist_signed.push_back((pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
         R.by_length.push_back({(v.truth.tip_px - v.truth.entry_px).norm(), R.dir_deg.back(), R.dist_rel.back()});
         if (baseline) baseline_axes[static_cast<std::size_t>(v.instrument)].push_back(pose.pose.axis);
       }
@@ -333,6 +340,10 @@ int main(int argc, char** argv) {
     if (verbose) {
       std::printf("  %s: %d of %d visible shafts found, %d of %d with a line cut off; %d false in %d frames\n", s.name.c_str(), r.found,
                   r.visible, r.cut_found, r.cut, r.false_shafts, r.frames);
+      std::printf("  %s: signed errors (median, p25..p75): distance %.3f %% (%.3f..%.3f), contour line outward of the true edge at mid-shaft %.3f px (%.3f..%.3f)\n",
+                  s.name.c_str(), 100 * percentile(r.dist_signed, 0.5), 100 * percentile(r.dist_signed, 0.25),
+                  100 * percentile(r.dist_signed, 0.75), percentile(r.line_signed, 0.5), percentile(r.line_signed, 0.25),
+                  percentile(r.line_signed, 0.75));
       for (std::size_t i = 0; i < r.trocar_after_100.size(); ++i)
         std::printf("  %s: trocar %zu over frames 100-%d: nearest estimate off the true mean by %.2f mm (median), %.2f (p95), %.2f (max)\n",
                     s.name.c_str(), i, r.frames - 1, percentile(r.trocar_after_100[i], 0.5), percentile(r.trocar_after_100[i], 0.95),

@@ -5,6 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/contour_lines.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/scene_renderer.h"
@@ -77,6 +78,47 @@ TEST(ContourLines, SubpixelEdgeOfAnAntiAliasedStep) {
   EXPECT_FALSE(refineLineSubpixel(flat, start, 5.0, 95.0, p));
 }
 
+// edgeChannel(): the chroma max - min at w = 0, exactly; the red-green opponent 4/3 (R - G) at w = 1.
+TEST(ContourLines, EdgeChannelMixesChromaAndRedGreen) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> U(0.f, 255.f);
+  for (int i = 0; i < 1000; ++i) {
+    float const b = U(rng), g = U(rng), r = U(rng);
+    EXPECT_EQ(edgeChannel(b, g, r, 0.f), ColourFeature::chroma(b, g, r));
+    EXPECT_NEAR(edgeChannel(b, g, r, 1.f), 4.f / 3.f * (r - g), 1e-3);
+    EXPECT_NEAR(edgeChannel(b, g, r, 0.3f), 0.7f * ColourFeature::chroma(b, g, r) + 0.4f * (r - g), 1e-3);
+  }
+}
+
+// Metal mirroring yellow fat beside pink tissue of the same chroma (90): the chroma has no edge,
+// the red-green opponent (90 -> 0, linear in the colour) locates it exactly; an even mix finds
+// it too (the chroma's part is not linear across this edge: min switches from G to B).
+TEST(ContourLines, RedGreenTermLocatesAShaftThatMirrorsTheTissueChroma) {
+  cv::Mat img(100, 100, CV_8UC3);
+  ImageLine const edge = *normalizeLine(Eigen::Vector3d(1.0, -0.1, -40.3));  // positive: shaft side
+  cv::Vec3d const tissue(150, 110, 200), mirror(60, 150, 150);  // BGR; chroma 90 and 90, R - G 90 and 0
+  ASSERT_EQ(ColourFeature::chroma(150, 110, 200), ColourFeature::chroma(60, 150, 150));
+  for (int y = 0; y < 100; ++y)
+    for (int x = 0; x < 100; ++x) {
+      double const cov = std::clamp(0.5 + edge.dot(Eigen::Vector3d(x, y, 1.0)), 0.0, 1.0);
+      cv::Vec3d const c = tissue * (1 - cov) + mirror * cov;
+      img.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]), cv::saturate_cast<uchar>(c[2]));
+    }
+  ImageLine const start = *normalizeLine(Eigen::Vector3d(1.0, -0.1, -41.0));
+  ContourLinesParams p;
+  p.edge_red_green_weight = 0.0;
+  EXPECT_FALSE(refineLineSubpixel(img, start, 5.0, 95.0, p));
+  for (double w : {1.0, 0.5}) {
+    p.edge_red_green_weight = w;
+    auto const r = refineLineSubpixel(img, start, 5.0, 95.0, p);
+    ASSERT_TRUE(r) << "w " << w;
+    for (double y : {10.0, 90.0}) {
+      double const x = -(r->line.y() * y + r->line.z()) / r->line.x();
+      EXPECT_NEAR(edge.dot(Eigen::Vector3d(x, y, 1.0)), 0.0, w == 1.0 ? 0.03 : 0.3) << "y " << y << " w " << w;
+    }
+  }
+}
+
 // The profiles' fast chroma samplers (SIMD, channels in the lanes) and the scalar one (used
 // when the brightness fallback is on) are the same bilinear chroma: on random colours, across
 // an edge near the image's right end (its last two columns take the scalar path), both give the
@@ -105,15 +147,18 @@ TEST(ContourLines, FastChromaSamplerMatchesTheScalarOne) {
   // Both fast samplers: eight samples per step where the CPU has AVX2 (25 per profile: three
   // steps, an overlapping last one, and steps near x = 118 that take the scalar sampler), one
   // (SSE2) without it or with OpenCV's optimisations off.
-  for (bool optimised : {true, false}) {
-    cv::setUseOptimized(optimised);
-    auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
-    ASSERT_TRUE(a && b);
-    ASSERT_EQ(a->points, b->points);
-    ASSERT_EQ(a->inliers.size(), b->inliers.size());
-    for (std::size_t i = 0; i < a->inliers.size(); ++i) EXPECT_LT((a->inliers[i] - b->inliers[i]).norm(), 1e-6) << i << " optimised " << optimised;
-    EXPECT_LT((a->line - b->line).norm(), 1e-9) << "optimised " << optimised;
-  }
+  // Each with the chroma alone and with the red-green term (edgeChannel(), lanes 2 - 1).
+  for (bool optimised : {true, false})
+    for (double w : {0.0, 0.3, 1.0}) {
+      cv::setUseOptimized(optimised);
+      fast.edge_red_green_weight = scalar.edge_red_green_weight = w;
+      auto const a = refineLineSubpixel(img, line, 2.0, 78.0, fast), b = refineLineSubpixel(img, line, 2.0, 78.0, scalar);
+      ASSERT_TRUE(a && b);
+      ASSERT_EQ(a->points, b->points);
+      ASSERT_EQ(a->inliers.size(), b->inliers.size());
+      for (std::size_t i = 0; i < a->inliers.size(); ++i) EXPECT_LT((a->inliers[i] - b->inliers[i]).norm(), 1e-6) << i << " optimised " << optimised << " w " << w;
+      EXPECT_LT((a->line - b->line).norm(), 1e-9) << "optimised " << optimised << " w " << w;
+    }
   cv::setUseOptimized(true);
 }
 
@@ -261,26 +306,30 @@ TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
   // A grey shaft with one highlight streak along it (a sixth of its width): a shaft.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
   cv::rectangle(img, cv::Point(117, 0), cv::Point(123, 239), cv::Scalar(250, 250, 250), cv::FILLED);
-  AcrossSamples s = acrossContour(img, c);
+  AcrossSamples s = acrossContour(img, c, 0.f);
   EXPECT_EQ(s.inside.size(), 39u * 3u);
   EXPECT_EQ(s.outside[0].size(), 39u);
   EXPECT_EQ(s.outside[1].size(), 39u);
   EXPECT_EQ(s.glare, 39);  // the middle samples only
   EXPECT_NEAR(s.outside[0].front(), 110.f, 1e-3);  // chroma of the tissue beside the left line
+  // With the red-green term: (1 - w) 110 + w 4/3 (170 - 70); the glare count is the chroma's.
+  AcrossSamples const sw = acrossContour(img, c, 0.3f);
+  EXPECT_NEAR(sw.outside[0].front(), 0.7f * 110.f + 0.3f * (4.f / 3.f) * 100.f, 1e-3);
+  EXPECT_EQ(sw.glare, 39);
   EXPECT_FALSE(mostlyGlare(img, c, p));
   // A white reflection filling the strip: glare.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(245, 250, 252), cv::FILLED);
-  s = acrossContour(img, c);
+  s = acrossContour(img, c, 0.f);
   EXPECT_EQ(s.glare, 39 * 3);
   EXPECT_TRUE(mostlyGlare(img, c, p));
   // Bright but coloured (pale pink tissue, chroma >= 30) is not glare; nor is white on half the
   // samples or fewer.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(200, 205, 245), cv::FILLED);
-  EXPECT_EQ(acrossContour(img, c).glare, 0);
+  EXPECT_EQ(acrossContour(img, c, 0.f).glare, 0);
   EXPECT_FALSE(mostlyGlare(img, c, p));
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
   cv::rectangle(img, cv::Point(100, 160), cv::Point(140, 239), cv::Scalar(250, 250, 250), cv::FILLED);  // toward the entry
-  s = acrossContour(img, c);
+  s = acrossContour(img, c, 0.f);
   EXPECT_GT(s.glare, 0);
   EXPECT_LE(s.glare, static_cast<int>(0.5 * s.inside.size()));
   EXPECT_FALSE(mostlyGlare(img, c, p));
@@ -290,7 +339,7 @@ TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
   // Samples off the image are left out (a strip reaching past the border).
   ApparentContour off = c;
   off.tip_px = Eigen::Vector2d(120.0, -100.0);
-  EXPECT_LT(acrossContour(img, off).inside.size(), 39u * 3u);
+  EXPECT_LT(acrossContour(img, off, 0.f).inside.size(), 39u * 3u);
 }
 
 // Grey shaft right of the exact line x = 40.3 + 0.1 y on red tissue (area coverage), over rows

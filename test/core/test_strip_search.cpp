@@ -234,21 +234,21 @@ TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
   float const averaged = ColourFeature::chroma(avg[0], avg[1], avg[2]), tissue = ColourFeature::chroma(70, 90, 200);
   EXPECT_LT(averaged, 0.75 * tissue) << "the band is not greyer than the tissue once averaged: no test";
   StripSearchParams const sp;
-  EXPECT_FALSE(stripContrastFullRes(speckled, c, sp));
+  EXPECT_FALSE(stripContrastFullRes(speckled, c, sp, 0.f));
   cv::Mat shaft = img.clone();
   shaft(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
-  EXPECT_TRUE(stripContrastFullRes(shaft, c, sp));
+  EXPECT_TRUE(stripContrastFullRes(shaft, c, sp, 0.f));
   // Metal mirroring the tissue: weakly contrasted (chroma at 0.7 of the tissue's) but matte.
   cv::Mat mirror = img.clone();
   float const t = ColourFeature::chroma(70, 90, 200);
   mirror(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(100, 110, 100 + 0.7 * t));
   cv::Vec3b const mp = mirror.at<cv::Vec3b>(240, 100);
   ASSERT_NEAR(ColourFeature::chroma(mp[0], mp[1], mp[2]), 0.7 * t, 2.0);
-  EXPECT_TRUE(stripContrastFullRes(mirror, c, sp));
+  EXPECT_TRUE(stripContrastFullRes(mirror, c, sp, 0.f));
   StripSearchParams strict = sp;
   strict.max_full_res_ratio_matte = strict.max_full_res_ratio;
-  EXPECT_FALSE(stripContrastFullRes(mirror, c, strict));
-  EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp), cv::Exception);
+  EXPECT_FALSE(stripContrastFullRes(mirror, c, strict, 0.f));
+  EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp, 0.f), cv::Exception);
 }
 
 // The SIMD walk (four rays per step) gives every ray exactly the scalar walk's score and length:

@@ -98,6 +98,7 @@ class InstrumentSegmenter {
   cv::Mat const& labels() const { return labels_; }
 
  private:
+  float edgeWeight() const { return static_cast<float>(params_.contours.edge_red_green_weight); }
   SegmentationParams params_;
   ColourFeature colour_;
   FieldOfView fov_;

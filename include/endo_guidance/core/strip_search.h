@@ -31,7 +31,7 @@ struct StripSearchParams {
   double max_inside_outside_ratio = 0.5;  ///< the strip's median feature over the tissue's beside each side
   double min_end_width = 0.45;     ///< the strip's far width over its entry width (perspective narrows it; crossing sides do not)
   int candidates_per_side = 8;    ///< best side hypotheses paired
-  double max_full_res_ratio = 0.5;  ///< stripContrastFullRes(): median chroma inside over outside
+  double max_full_res_ratio = 0.5;  ///< stripContrastFullRes(): median edge channel inside over outside
   double max_full_res_ratio_matte = 0.9;  ///< ... the same for a strip with few highlights inside
   double max_specular_fraction = 0.05;    ///< ... "few": this fraction of the inside samples
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
@@ -88,7 +88,9 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
 /// (white dots between red pixels) averages to a grey strip; at full resolution most of it is
 /// tissue and many of its samples are white. Metal mirroring the tissue is weakly contrasted but
 /// matte.
-bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, StripSearchParams const& params);
+/// Samples of edgeChannel() with the red-green weight given (acrossContour()).
+bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& contour, StripSearchParams const& params,
+                          float red_green_weight);
 /// The same from samples already taken (acrossContour()).
 bool stripContrastFullRes(AcrossSamples samples, StripSearchParams const& params);
 
