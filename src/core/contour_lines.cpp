@@ -108,7 +108,7 @@ std::optional<RefinedLine> summarizeLine(Eigen::Vector3d const& l, std::vector<E
 
 // Bilinear sample of the edge channel (edgeChannel(), red-green weight w) of a BGR image at
 // (x, y); false outside.
-bool chromaAt(cv::Mat const& bgr, double x, double y, float w, float* out, float* value = nullptr) {
+bool edgeAt(cv::Mat const& bgr, double x, double y, float w, float* out, float* value = nullptr) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
   int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
@@ -139,16 +139,16 @@ __attribute__((target("avx2"))) inline __m256i cornerLanes(char const* base, int
 __attribute__((target("avx2"))) inline __m256 channel(__m256i q, int ch, __m256i mask) {
   return _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(q, 8 * ch), mask));
 }
-// sampleChroma() eight samples per step, one per lane, the channels in separate vectors: each
-// corner is 4 bytes per sample (B, G, R, -). Positions in double as chromaAt() computes them
+// sampleEdgeChannel() eight samples per step, one per lane, the channels in separate vectors: each
+// corner is 4 bytes per sample (B, G, R, -). Positions in double as edgeAt() computes them
 // (a + i d: multiply, then add; no FMA is enabled here, so none is contracted), the bilinear
-// interpolation with chromaAt()'s operations in its order: identical results. A step with a
-// sample whose loads would pass the end of its row (the last two columns) takes chromaAt(), as
+// interpolation with edgeAt()'s operations in its order: identical results. A step with a
+// sample whose loads would pass the end of its row (the last two columns) takes edgeAt(), as
 // does a profile shorter than 8 samples. The last step overlaps the one before.
-__attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d,
+__attribute__((target("avx2"))) void sampleEdgeChannelAvx2(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d,
                                                       int count, float w, float* out) {
   if (count < 8) {
-    for (int i = 0; i < count; ++i) chromaAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), w, &out[i]);
+    for (int i = 0; i < count; ++i) edgeAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), w, &out[i]);
     return;
   }
   int const stride = static_cast<int>(bgr.step[0]);
@@ -166,7 +166,7 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
     __m128i const yi_lo = _mm256_cvttpd_epi32(y_lo), yi_hi = _mm256_cvttpd_epi32(y_hi);
     __m256i const x0 = _mm256_set_m128i(xi_hi, xi_lo), y0 = _mm256_set_m128i(yi_hi, yi_lo);
     if (!_mm256_testz_si256(_mm256_cmpgt_epi32(x0, x_last), _mm256_cmpgt_epi32(x0, x_last))) {
-      for (int k = i; k < i + 8; ++k) chromaAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), w, &out[k]);
+      for (int k = i; k < i + 8; ++k) edgeAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), w, &out[k]);
       continue;
     }
     __m256 const fx = _mm256_set_m128(_mm256_cvtpd_ps(_mm256_sub_pd(x_hi, _mm256_cvtepi32_pd(xi_hi))),
@@ -196,17 +196,17 @@ __attribute__((target("avx2"))) void sampleChromaAvx2(cv::Mat const& bgr, Eigen:
 }
 #endif
 
-// The chroma at a + i d, i = 0..count-1, bilinear, all inside the image (chromaAt() without the
+// The chroma at a + i d, i = 0..count-1, bilinear, all inside the image (edgeAt() without the
 // bounds test and the brightness: the inner loop of the sub-pixel refinement). One sample per
 // SIMD step with the channels in the lanes: each corner is one 4-byte load (B, G, R and the next
-// pixel's B, unused), interpolated with the same operations, in the same order, as chromaAt(), so
+// pixel's B, unused), interpolated with the same operations, in the same order, as edgeAt(), so
 // the results are identical. A sample whose 4-byte load would pass the end of its row (the last
-// two columns) takes chromaAt(). On a CPU with AVX2 (and OpenCV's optimisations on:
-// cv::setUseOptimized()), eight samples per step (sampleChromaAvx2()), the same results. perf on
+// two columns) takes edgeAt(). On a CPU with AVX2 (and OpenCV's optimisations on:
+// cv::setUseOptimized()), eight samples per step (sampleEdgeChannelAvx2()), the same results. perf on
 // a 640x480 frame: the sampler's share 14 % with two samples per step, 11 % with eight.
-void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float w, float* out) {
+void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float w, float* out) {
 #ifdef ENDO_GUIDANCE_AVX2_SAMPLER
-  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleChromaAvx2(bgr, a, d, count, w, out);
+  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleEdgeChannelAvx2(bgr, a, d, count, w, out);
 #endif
   std::size_t const stride = bgr.step[0];
   std::uint8_t const* const data = bgr.data;
@@ -217,7 +217,7 @@ void sampleChroma(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d 
     double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
     int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
     if (x0 > x_last) {
-      chromaAt(bgr, x, y, w, &out[i]);
+      edgeAt(bgr, x, y, w, &out[i]);
       continue;
     }
     cv::v_float32x4 const fx = cv::v_setall_f32(static_cast<float>(x - x0)), fy = cv::v_setall_f32(static_cast<float>(y - y0));
@@ -325,7 +325,7 @@ class EdgeProfiler {
     Eigen::Vector2d const o = -line.z() * n;    // foot of the origin
     double const xmax = bgr_.cols - 1, ymax = bgr_.rows - 1;
     Eigen::Vector2d const base = o + t * dir;
-    // The profile lies inside the image if both its ends do (chromaAt's bounds).
+    // The profile lies inside the image if both its ends do (edgeAt's bounds).
     Eigen::Vector2d const a = base - h_ * n, b = base + (-h_ + (ns_ - 1) * ds_) * n;
     if (!(std::min(a.x(), b.x()) >= 0.0 && std::min(a.y(), b.y()) >= 0.0 && std::max(a.x(), b.x()) < xmax &&
           std::max(a.y(), b.y()) < ymax))
@@ -333,13 +333,14 @@ class EdgeProfiler {
     if (need_value_) {
       for (int i = 0; i < ns_; ++i) {
         Eigen::Vector2d const q = base + (-h_ + i * ds_) * n;
-        chromaAt(bgr_, q.x(), q.y(), w_, &prof_[i], &val_[i]);
+        edgeAt(bgr_, q.x(), q.y(), w_, &prof_[i], &val_[i]);
       }
     } else {
-      sampleChroma(bgr_, a, ds_ * n, ns_, w_, prof_.data());
+      sampleEdgeChannel(bgr_, a, ds_ * n, ns_, w_, prof_.data());
     }
-    // The edge is located in chroma, where the shaded rim of a grey shaft does not bias it (metal
-    // mirrors tissue colours, so it is the steepest descent, not the first seen from inside --
+    // The edge is located in the edge channel (chroma, with the red-green term if set), where
+    // the shaded rim of a grey shaft does not bias it (metal mirrors tissue colours, so it is the
+    // steepest descent, not the first seen from inside --
     // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
     // little chroma contrast: then its drop in brightness is used.
     auto at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_);

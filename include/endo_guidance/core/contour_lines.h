@@ -2,7 +2,6 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <opencv2/core.hpp>
@@ -11,6 +10,7 @@
 #include <vector>
 
 #include "endo_guidance/core/apparent_contour.h"
+#include "endo_guidance/core/colour_feature.h"
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/region_growing.h"
 
@@ -30,8 +30,7 @@ constexpr float kRedGreenScale = 4.0f / 3.0f;
 /// EndoVis'15 stills: AUC 0.93 / 0.78 (chroma; images where a shaft was found / missed),
 /// 0.95 / 0.87 (R - G).
 inline float edgeChannel(float b, float g, float r, float w) {
-  float const mx = std::max(b, std::max(g, r)), mn = std::min(b, std::min(g, r));
-  return (1.f - w) * (mx - mn) + (w * kRedGreenScale) * (r - g);
+  return (1.f - w) * ColourFeature::chroma(b, g, r) + (w * kRedGreenScale) * (r - g);
 }
 
 struct ContourLinesParams {
