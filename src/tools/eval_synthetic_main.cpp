@@ -165,8 +165,8 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       if (pose.ok()) {
         R.dir_deg.push_back(std::atan2(pose.pose.axis.direction().cross(v.axis.direction()).norm(),
                                        pose.pose.axis.direction().dot(v.axis.direction())) * 180.0 / M_PI);
-        R.dist_rel.push_back(std::abs(pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
         R.dist_signed.push_back((pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
+        R.dist_rel.push_back(std::abs(R.dist_signed.back()));
         R.by_length.push_back({(v.truth.tip_px - v.truth.entry_px).norm(), R.dir_deg.back(), R.dist_rel.back()});
         if (baseline) baseline_axes[static_cast<std::size_t>(v.instrument)].push_back(pose.pose.axis);
       }
