@@ -182,6 +182,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
   std::vector<std::size_t> contour_memory;  // per accepted contour: its seed's entry in memory_now
+  std::vector<std::size_t> contour_region;  // ... and its region's index in res.regions
   bool all_confirmed = true;  // every shaft found was also found at the last detection (its seed's memory)
   grower_.reset(filtered_, fov_);
   bool have_gradient = false;
@@ -526,9 +527,22 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       c.insertion_point_id = seed.insertion_point;
       res.contours.push_back(c);
       contour_memory.push_back(memory_now.size() - 1);  // this seed's memory (pushed above)
+      contour_region.push_back(res.regions.size() - 1);  // its region (pushed above)
       all_confirmed = all_confirmed && mem && mem->accepted;
       res.edges.push_back(best_fit.edges);
     }
+  }
+  // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is
+  // a duplicate as in the other order (in-vivo OP1/img_16, img_26, OP2/img_03: 5 shafts
+  // reported twice). Its seed's memory stays a shaft's, as for a duplicate refused above.
+  auto const dup = narrowerDuplicates(res.contours);
+  for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
+    std::size_t const i = *it;
+    res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
+    contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
+    res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
+    res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
+    contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
   }
   labels_ = grower_.labels();
   memory_ = std::move(memory_now);
@@ -686,6 +700,28 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
     if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
   }
   return false;
+}
+
+std::vector<std::size_t> narrowerDuplicates(std::vector<ApparentContour> const& found) {
+  auto widthAt = [](ApparentContour const& c, Eigen::Vector2d const& x) {
+    Eigen::Vector3d const f = footOnLine(imageAxis(c), x).homogeneous();
+    return c.lines[0].dot(f) + c.lines[1].dot(f);
+  };
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < found.size(); ++i) {
+    Eigen::Vector2d const mid = 0.5 * (found[i].entry_px + found[i].tip_px);
+    double const wi = widthAt(found[i], mid);
+    for (std::size_t j = 0; j < found.size(); ++j) {
+      if (j == i) continue;
+      double const wj = widthAt(found[j], mid);
+      // (equal widths: the later one goes, as when it was found)
+      if ((wj > wi || (wj == wi && j < i)) && duplicatesAShaft(found[i], {found[j]})) {
+        out.push_back(i);
+        break;
+      }
+    }
+  }
+  return out;
 }
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {

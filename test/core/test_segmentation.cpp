@@ -618,3 +618,18 @@ TEST(Segmentation, ASecondDetectionInsideAShaftsStripIsADuplicate) {
   EXPECT_FALSE(duplicatesAShaft(bandContour({100, 300}, {300, 300 - 200 * std::tan(M_PI / 6)}, 18), found));  // crossing
   EXPECT_FALSE(duplicatesAShaft(bandContour({0, 244}, {300, 244 - 300 * t6}, 18), found));  // leaves the strip
 }
+
+// narrowerDuplicates(), exact geometry: a shaft 80 px wide along y = 240 and a strip 30 px wide
+// inside it along its upper edge (the strip between an edge and a printed label). The strip is
+// the duplicate whichever was found first; the whole shaft never is. A shaft beside another, or
+// crossing it, is no duplicate; of two equal detections the later one is.
+TEST(Segmentation, AStripInsideAWiderShaftIsTheDuplicateInEitherOrder) {
+  ApparentContour const whole = bandContour({0, 240}, {400, 240}, 40), strip = bandContour({0, 260}, {300, 258}, 15);
+  EXPECT_EQ(narrowerDuplicates({whole, strip}), (std::vector<std::size_t>{1}));
+  EXPECT_EQ(narrowerDuplicates({strip, whole}), (std::vector<std::size_t>{0}));
+  EXPECT_EQ(narrowerDuplicates({whole, whole}), (std::vector<std::size_t>{1}));
+  EXPECT_TRUE(narrowerDuplicates({whole, bandContour({0, 330}, {400, 330}, 40)}).empty());  // side by side
+  EXPECT_TRUE(narrowerDuplicates({bandContour({100, 300}, {300, 300 - 200 * std::tan(M_PI / 6)}, 15), whole}).empty());  // crossing
+  // Three: a strip inside the whole shaft and a shaft beside them; only the strip goes.
+  EXPECT_EQ(narrowerDuplicates({strip, bandContour({0, 400}, {400, 420}, 30), whole}), (std::vector<std::size_t>{0}));
+}

@@ -146,6 +146,13 @@ class InstrumentSegmenter {
 inline constexpr double kDuplicateMaxAngleDeg = 15.0;
 bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found);
 
+/// The shafts of `found` that are second detections (duplicatesAShaft()) of a wider one in it,
+/// whichever was found first, ascending: one shaft seen as a whole and again as the strip
+/// between one edge and its printed label or highlight. Widths are compared at the middle of
+/// the narrower's axis. The wider is kept: a strip inside a shaft's image is not a second
+/// instrument (two instruments cannot overlap by half a width and stay parallel).
+std::vector<std::size_t> narrowerDuplicates(std::vector<ApparentContour> const& found);
+
 /// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image
 /// (seed Fig. 1, 2, 6).
 void drawSegmentationOverlay(cv::Mat& bgr, SegmentationResult const& result,
