@@ -100,6 +100,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/max_regions", i(S.regions.max_regions)},
       {"segmentation/max_angle_deg", d(S.contours.max_angle_deg)},
       {"segmentation/min_length_px", d(S.contours.min_length_px)},
+      {"segmentation/min_width_px", d(S.contours.min_width_px)},
       {"segmentation/max_residual_px", d(S.contours.max_residual_px)},
       {"segmentation/extend_max_misses", i(S.contours.extend_max_misses)},
       {"segmentation/extend_gate_px", d(S.contours.extend_gate_px)},

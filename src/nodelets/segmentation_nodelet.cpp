@@ -100,6 +100,7 @@ void SegmentationNodelet::onInit() {
   c.seed_relative_threshold = S.seeds.relative_threshold;
   c.max_angle_deg = S.contours.max_angle_deg;
   c.min_length_px = S.contours.min_length_px;
+  c.min_width_px = S.contours.min_width_px;
   c.max_residual_px = S.contours.max_residual_px;
   c.min_edge_contrast = S.contours.min_edge_contrast;
   c.edge_red_green_weight = S.contours.edge_red_green_weight;
@@ -157,6 +158,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.seeds.relative_threshold = c.seed_relative_threshold;
   S.contours.max_angle_deg = c.max_angle_deg;
   S.contours.min_length_px = c.min_length_px;
+  S.contours.min_width_px = c.min_width_px;
   S.contours.max_residual_px = c.max_residual_px;
   S.contours.min_edge_contrast = c.min_edge_contrast;
   S.contours.edge_red_green_weight = c.edge_red_green_weight;

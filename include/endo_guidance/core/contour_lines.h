@@ -39,7 +39,7 @@ struct ContourLinesParams {
   double min_inlier_fraction = 0.5;  ///< LMedS inliers per side: fewer and the side is not a straight line
   double max_angle_deg = 20.0;    ///< between the two contour lines
   double min_length_px = 30.0;    ///< full-res: entry to tip
-  double min_width_px = 3.0;      ///< full-res: shaft width at entry and tip
+  double min_width_px = 8.0;      ///< full-res: shaft width at entry and tip (3 -> 8: robotic DS2 false 0.11 -> 0.05 per frame)
   int lmeds_samples = 30;         ///< random pairs per side (P(no clean pair) < 1e-3 at 20 % outliers)
   int max_gap_points = 6;         ///< a side ends after this many consecutive boundary points off its line
   double refine_step_px = 2.0;    ///< full-res: spacing of the edge profiles along a line (every
