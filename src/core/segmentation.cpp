@@ -533,8 +533,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     }
   }
   // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is
-  // a duplicate as in the other order (in-vivo OP1/img_16, img_26, OP2/img_03: 5 shafts
-  // reported twice). Its seed's memory stays a shaft's, as for a duplicate refused above.
+  // a duplicate as in the other order (in-vivo OP1/img_16 and OP2/img_03 were reported twice).
+  // Its seed's memory stays a shaft's, as for a duplicate refused above.
   auto const dup = narrowerDuplicates(res.contours);
   for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
     std::size_t const i = *it;
@@ -703,17 +703,13 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
 }
 
 std::vector<std::size_t> narrowerDuplicates(std::vector<ApparentContour> const& found) {
-  auto widthAt = [](ApparentContour const& c, Eigen::Vector2d const& x) {
-    Eigen::Vector3d const f = footOnLine(imageAxis(c), x).homogeneous();
-    return c.lines[0].dot(f) + c.lines[1].dot(f);
-  };
   std::vector<std::size_t> out;
   for (std::size_t i = 0; i < found.size(); ++i) {
     Eigen::Vector2d const mid = 0.5 * (found[i].entry_px + found[i].tip_px);
-    double const wi = widthAt(found[i], mid);
+    double const wi = shaftWidthAt(found[i], mid);
     for (std::size_t j = 0; j < found.size(); ++j) {
       if (j == i) continue;
-      double const wj = widthAt(found[j], mid);
+      double const wj = shaftWidthAt(found[j], mid);
       // (equal widths: the later one goes, as when it was found)
       if ((wj > wi || (wj == wi && j < i)) && duplicatesAShaft(found[i], {found[j]})) {
         out.push_back(i);

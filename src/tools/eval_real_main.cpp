@@ -54,12 +54,6 @@ std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {
   return poly;
 }
 
-// The distance between the contour lines at the foot of x on the image axis (px).
-double contourWidth(ApparentContour const& c, Eigen::Vector2d const& x) {
-  Eigen::Vector3d const f = footOnLine(imageAxis(c), x).homogeneous();
-  return c.lines[0].dot(f) + c.lines[1].dot(f);
-}
-
 struct InvivoStats {
   int images = 0, shafts = 0, found = 0, detections = 0, false_shafts = 0;
   std::vector<double> line_median_px;  // per detection matched to a shaft: median boundary distance
@@ -179,7 +173,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
         if (verbose)
           std::printf("  hit %s/%s id %d: line to mask boundary median %.2f px (signed, + = mask inside the lines: %.2f), residual %.2f px, width %.1f px at the entry, %.1f at the tip\n",
                       f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
-                      percentile(signed_d, 0.5), c.residual_px, contourWidth(c, c.entry_px), contourWidth(c, c.tip_px));
+                      percentile(signed_d, 0.5), c.residual_px, shaftWidthAt(c, c.entry_px), shaftWidthAt(c, c.tip_px));
         st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
       }
     }

@@ -161,7 +161,9 @@ TEST(CylinderPose, DegenerateInputIsFlagged) {
   EXPECT_EQ(status(-l0, -l1, 0.004, {}, shaft_px), CylinderPoseStatus::kWrongSide);
   // Without that pixel, a flipped line selects the other wedge: a different, far-off cylinder.
   auto const other = estimateCylinderPose(K, 0.004, l0, -l1);
-  if (other.ok()) EXPECT_GT(other.pose.axis.distanceTo(*axis), 0.001);
+  if (other.ok()) {
+    EXPECT_GT(other.pose.axis.distanceTo(*axis), 0.001);
+  }
   // The forward model refuses a camera inside or on the cylinder.
   EXPECT_FALSE(projectCylinder(K, *axis, axis->distanceToOrigin()));
   EXPECT_FALSE(projectCylinder(K, *axis, 2.0 * axis->distanceToOrigin()));

@@ -624,6 +624,14 @@ TEST(Segmentation, ASecondDetectionInsideAShaftsStripIsADuplicate) {
 // the duplicate whichever was found first; the whole shaft never is. A shaft beside another, or
 // crossing it, is no duplicate; of two equal detections the later one is.
 TEST(Segmentation, AStripInsideAWiderShaftIsTheDuplicateInEitherOrder) {
+  // shaftWidthAt(): the width at the foot of the point on the axis, wherever the point lies.
+  ApparentContour cone;  // lines from (0, 200) to (400, 220) and (0, 300) to (400, 280): 100 -> 60 px
+  cone.lines = {*lineThrough({400, 220}, {0, 200}), *lineThrough({0, 300}, {400, 280})};
+  cone.entry_px = {0, 250};
+  cone.tip_px = {400, 250};
+  EXPECT_NEAR(shaftWidthAt(cone, {0, 250}), 100.0 * std::cos(std::atan(0.05)), 1e-9);
+  EXPECT_NEAR(shaftWidthAt(cone, {200, 250}), shaftWidthAt(cone, {200, 180}), 1e-9);
+  EXPECT_NEAR(shaftWidthAt(cone, {400, 250}), 60.0 * std::cos(std::atan(0.05)), 1e-9);
   ApparentContour const whole = bandContour({0, 240}, {400, 240}, 40), strip = bandContour({0, 260}, {300, 258}, 15);
   EXPECT_EQ(narrowerDuplicates({whole, strip}), (std::vector<std::size_t>{1}));
   EXPECT_EQ(narrowerDuplicates({strip, whole}), (std::vector<std::size_t>{0}));

@@ -43,6 +43,13 @@ inline ImageLine imageAxis(ApparentContour const& c) {
   return n > 1e-12 ? ImageLine(a / n) : c.lines[0];
 }
 
+/// The shaft's image width (px) at the foot of q on its image axis: the sum of the two lines'
+/// signed distances there (both positive inside).
+inline double shaftWidthAt(ApparentContour const& c, Eigen::Vector2d const& q) {
+  Eigen::Vector3d const f = footOnLine(imageAxis(c), q).homogeneous();
+  return c.lines[0].dot(f) + c.lines[1].dot(f);
+}
+
 /// Scales l so that a^2 + b^2 = 1, keeping its orientation. nullopt if a = b = 0 or not finite.
 std::optional<ImageLine> normalizeLine(Eigen::Vector3d const& l);
 
