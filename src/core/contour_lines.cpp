@@ -196,7 +196,7 @@ __attribute__((target("avx2"))) void sampleEdgeChannelAvx2(cv::Mat const& bgr, E
 }
 #endif
 
-// The chroma at a + i d, i = 0..count-1, bilinear, all inside the image (edgeAt() without the
+// The edge channel at a + i d, i = 0..count-1, bilinear, all inside the image (edgeAt() without the
 // bounds test and the brightness: the inner loop of the sub-pixel refinement). One sample per
 // SIMD step with the channels in the lanes: each corner is one 4-byte load (B, G, R and the next
 // pixel's B, unused), interpolated with the same operations, in the same order, as edgeAt(), so

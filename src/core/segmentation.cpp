@@ -539,7 +539,6 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
     std::size_t const i = *it;
     res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
-    contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
     res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
     res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
     contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
