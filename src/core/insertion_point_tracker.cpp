@@ -19,6 +19,9 @@ void InsertionPointTracker::clearSums() {
   Bu_.setZero();
   sw_ = sw2_ = 0.0;
   accepted_ = consecutive_rejects_ = 0;
+  blocks_.clear();
+  open_ = {Eigen::Matrix4d::Zero(), 0};
+  open_n_ = 0;
 }
 
 void InsertionPointTracker::reset() {
@@ -93,11 +96,42 @@ void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d con
     double const chi = std::sqrt(std::max(0.0, r.dot(W * r)));
     if (chi > options_.huber_k) W *= options_.huber_k / chi;
   }
-  Bw_ = rho_ * Bw_ + Bk.transpose() * W * Bk;
+  Eigen::Matrix4d const Mk = Bk.transpose() * W * Bk;
+  Bw_ = rho_ * Bw_ + Mk;
   Bu_ = rho_ * Bu_ + Bk.transpose() * Bk;
   sw_ = rho_ * sw_ + 1.0;
   sw2_ = rho_ * rho_ * sw2_ + 1.0;
   ++accepted_;
+  if (options_.correlation_views > 0) {
+    open_.M = rho_ * open_.M + Mk;
+    open_.end = accepted_;
+    if (++open_n_ >= options_.correlation_views) {
+      blocks_.push_back(open_);
+      open_ = {Eigen::Matrix4d::Zero(), accepted_};
+      open_n_ = 0;
+      // A block whose weight has fallen under 1e-3 (7 memory time constants) no longer counts.
+      std::size_t const horizon = static_cast<std::size_t>(7.0 * std::max(1.0, options_.memory_views));
+      while (!blocks_.empty() && accepted_ - blocks_.front().end > horizon) blocks_.pop_front();
+    }
+  }
+}
+
+// The cluster-robust covariance of the estimate (see the class comment): the blocks' score
+// vectors at x~, forgotten to the last axis, their scatter between S^-1 on both sides.
+Eigen::Matrix3d InsertionPointTracker::clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt,
+                                                         std::size_t* blocks) const {
+  Eigen::Matrix3d meat = Eigen::Matrix3d::Zero();
+  std::size_t nb = 0;
+  auto add = [&](Block const& b) {
+    Eigen::Vector3d const g = std::pow(rho_, static_cast<double>(accepted_ - b.end)) * (b.M * xt).head<3>();
+    meat += g * g.transpose();
+    ++nb;
+  };
+  for (auto const& b : blocks_) add(b);
+  if (open_n_ > 0) add(open_);
+  *blocks = nb;
+  if (nb < 2) return Eigen::Matrix3d::Zero();
+  return Sinv * meat * Sinv * (static_cast<double>(nb) / static_cast<double>(nb - 1));
 }
 
 void InsertionPointTracker::solve() {
@@ -126,6 +160,14 @@ void InsertionPointTracker::solve() {
   double const dof = std::max(1.0, 2.0 * n_eff - 3.0);
   double const chi2 = std::max(0.0, xt.dot(Bw_ * xt)) * n_eff / sw_ / dof;
   e.covariance = Sinv * (sw2_ / sw_) * std::max(1.0, chi2);
+  // Consecutive axes share their errors: the covariance must cover the scatter of blocks of them
+  // too (from three blocks on; it is only ever widened, in the model's shape).
+  std::size_t nb = 0;
+  Eigen::Matrix3d const Sc = options_.correlation_views > 0 ? clusterCovariance(Sinv, xt, &nb) : Eigen::Matrix3d::Zero();
+  if (nb >= 3) {
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix3d> ge(Sc, e.covariance, Eigen::EigenvaluesOnly);
+    if (ge.info() == Eigen::Success && std::isfinite(ge.eigenvalues()(2))) e.covariance *= std::max(1.0, ge.eigenvalues()(2));
+  }
   e.position = x + origin_;
   Eigen::Vector4d h;
   h << e.position, 1.0;

@@ -222,6 +222,39 @@ TEST(InsertionPointTracker, OutlierStreamAndRelocation) {
   EXPECT_TRUE(std::isinf(t.distanceTo(good[0])));
 }
 
+// Axes whose errors are shared by runs of consecutive axes (a shaft seen over several frames
+// keeps its compression and shading errors): the covariance must still cover the estimate's
+// error. Taking the axes as independent, it is about sqrt(10) too small here.
+TEST(InsertionPointTracker, CovarianceCoversErrorsSharedByConsecutiveAxes) {
+  auto mahalanobis2 = [](std::size_t correlation_views, int trial) {
+    std::mt19937_64 rng(100 + trial);
+    std::normal_distribution<double> N(0.0, 1.0);
+    InsertionPointTrackerOptions o;
+    o.correlation_views = correlation_views;
+    InsertionPointTracker t(o);
+    auto const axes = axesThrough(kTrocar, 300, rng);
+    Eigen::Vector3d shared = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k < axes.size(); ++k) {
+      if (k % 10 == 0) shared = 0.001 * Eigen::Vector3d(N(rng), N(rng), N(rng));  // 1 mm, per run of 10 axes
+      Eigen::Vector3d const own = 0.0001 * Eigen::Vector3d(N(rng), N(rng), N(rng));
+      t.update(*PluckerLine::fromPointDirection(kTrocar + shared + own, axes[k].direction()));
+    }
+    EXPECT_TRUE(t.estimate().ok());
+    Eigen::Vector3d const e = t.estimate().position - kTrocar;
+    return e.dot(t.estimate().covariance.ldlt().solve(e));
+  };
+  int const trials = 60;
+  int covered = 0, covered_model = 0;
+  for (int i = 0; i < trials; ++i) {
+    covered += mahalanobis2(10, i) < 7.81;      // chi^2 (3 dof) 95 % point
+    covered_model += mahalanobis2(0, i) < 7.81;
+  }
+  std::printf("[ errors shared by 10 consecutive axes ] within the 95 %% ellipsoid: %d / %d (model covariance alone: %d)\n",
+              covered, trials, covered_model);
+  EXPECT_GE(covered, static_cast<int>(0.85 * trials));
+  EXPECT_LT(covered_model, static_cast<int>(0.6 * trials));  // the case is one the model alone fails
+}
+
 TEST(InsertionPointTracker, AnUncertainAxisDoesNotWidenTheGate) {
   // Exact axes through the point: its spread is nil, and the gate is the default one. An axis
   // whose own covariance is wide at the point (a short shaft) does not widen it to gate_max: a
