@@ -230,10 +230,13 @@ std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
     auto const& p = out.insertion_points[i];
     std::string pixel = "null";
     if (std::abs(p.image_point.z()) > 1e-12) pixel = vec(Eigen::Vector2d(p.image_point.head<2>() / p.image_point.z()));
+    // Row-major 3x3, m^2, as InsertionPoint.msg (null entries where it is unbounded).
+    Eigen::Matrix<double, 3, 3, Eigen::RowMajor> const cov = p.estimate.covariance;
     j << (i ? ", " : "") << "{\"id\": " << p.id << ", \"position\": " << vec(p.estimate.position) << ", \"pixel\": " << pixel
       << ", \"views\": " << p.estimate.views << ", \"rms_m\": " << num(p.estimate.rms_distance)
       << ", \"conditioning\": " << num(p.estimate.conditioning)
-      << ", \"well_conditioned\": " << (p.well_conditioned ? "true" : "false") << "}";
+      << ", \"well_conditioned\": " << (p.well_conditioned ? "true" : "false")
+      << ", \"covariance\": " << vec(Eigen::Map<Eigen::Matrix<double, 9, 1> const>(cov.data())) << "}";
   }
   j << "], \"latency_ms\": " << num(out.latency_ms) << "}";
   return j.str();

@@ -57,6 +57,11 @@ for r in good:
         for l in i["contours"]:
             assert abs(math.hypot(l[0], l[1]) - 1) < 1e-6
 assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
+for p in rows[-1]["insertion_points"]:
+    C = p["covariance"]  # row-major 3x3, m^2: symmetric, positive diagonal, a sigma of mm here
+    assert len(C) == 9 and all(abs(C[3 * a + b] - C[3 * b + a]) <= 1e-9 * abs(C[0]) for a in range(3) for b in range(3)), C
+    assert all(C[4 * a] > 0 for a in range(3)), C
+    assert 1e-5 < math.sqrt(C[0] + C[4] + C[8]) < 0.02, C
 print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts")
 PY
 test "$(ls "$T/ov" | wc -l)" -eq 118
