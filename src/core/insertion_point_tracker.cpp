@@ -73,6 +73,14 @@ bool InsertionPointTracker::wellConditioned() const {
          estimate_.conditioning >= options_.min_conditioning;
 }
 
+bool InsertionPointTracker::located() const {
+  if (!wellConditioned()) return false;
+  if (!(options_.max_sigma > 0.0)) return true;
+  if (!estimate_.covariance.allFinite()) return false;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(estimate_.covariance, Eigen::EigenvaluesOnly);
+  return es.eigenvalues()(2) <= options_.max_sigma * options_.max_sigma;
+}
+
 void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d const& at) {
   Eigen::Vector3d const& d = o.axis.direction();
   Eigen::Vector3d const m = o.axis.moment() - origin_.cross(d);  // the axis relative to origin_

@@ -40,6 +40,7 @@ std::vector<InsertionPointReport> reportInsertionPoints(InsertionPointSet const&
     rep.estimate = p.tracker.estimate();
     rep.image_point = projectPointHomogeneous(K, rep.estimate.position);
     rep.well_conditioned = p.tracker.wellConditioned();
+    rep.located = p.tracker.located();
     out.push_back(rep);
   }
   return out;

@@ -139,6 +139,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"insertion_points/memory_views", d(T.tracker.memory_views)},
       {"insertion_points/min_views", z(T.tracker.min_views)},
       {"insertion_points/min_conditioning", d(T.tracker.min_conditioning)},
+      {"insertion_points/max_sigma", d(T.tracker.max_sigma)},
       {"insertion_points/point_motion_sigma", d(T.tracker.point_motion_sigma)},
       {"insertion_points/gate_max", d(T.tracker.gate_max)},
       {"insertion_points/correlation_views", z(T.tracker.correlation_views)},
@@ -183,6 +184,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(p.pose.min_distance > 0.0 && p.pose.min_distance < p.pose.max_distance, "pose/min_distance",
        "positive and below pose/max_distance");
   need(T.max_points >= 0, "insertion_points/max_points", ">= 0 (0: as many as the axes support)");
+  need(T.tracker.max_sigma >= 0.0, "insertion_points/max_sigma", ">= 0 (0: no limit)");
   // The growth levels index these lists (region_growing.h): refused, not guessed.
   auto const& g = S.regions.thresholds;
   if (g.empty() || !std::is_sorted(g.begin(), g.end()) || std::adjacent_find(g.begin(), g.end()) != g.end() || g.front() < 0 || g.back() > 255)

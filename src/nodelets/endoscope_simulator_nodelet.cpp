@@ -180,6 +180,7 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
     r.estimate.position = trocar_c;
     r.image_point = K_ * trocar_c;
     r.well_conditioned = true;
+    r.located = true;  // the truth
     InsertionPoint p;
     if (ros_io::toMsg(r, p)) points->points.push_back(p);
     auto const view = core::viewOfInstrument(K_, static_cast<int>(info_.width), static_cast<int>(info_.height), trocar_c, tip_c,

@@ -84,6 +84,7 @@ void InsertionPointsNodelet::onInit() {
   c.reject_unattached = params_.reject_unattached;
   c.attach_distance = params_.insertion_points.attach_distance;
   c.min_conditioning = params_.insertion_points.tracker.min_conditioning;
+  c.max_sigma = params_.insertion_points.tracker.max_sigma;
   c.point_motion_sigma = params_.insertion_points.tracker.point_motion_sigma;
   c.gate_max = params_.insertion_points.tracker.gate_max;
   reconfigure_->updateConfig(c);
@@ -103,6 +104,7 @@ void InsertionPointsNodelet::configCb(InsertionPointsConfig& c, uint32_t) {
   params_.reject_unattached = c.reject_unattached;
   params_.insertion_points.attach_distance = c.attach_distance;
   params_.insertion_points.tracker.min_conditioning = c.min_conditioning;
+  params_.insertion_points.tracker.max_sigma = c.max_sigma;
   params_.insertion_points.tracker.point_motion_sigma = c.point_motion_sigma;
   params_.insertion_points.tracker.gate_max = c.gate_max;
   if (set_) set_->setOptions(params_.insertion_points);
@@ -174,7 +176,9 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     if (!ros_io::toMsg(r, p)) continue;
     points->points.push_back(p);
     if (markers) ros_io::appendTrocarMarkers(mk->markers, msg->header, r, attached[r.id]);
-    if (!r.well_conditioned) continue;  // an ill-conditioned point is not a frame: flagged, not guessed
+    // An ill-conditioned point, or one not yet located along its axes, is not a frame to pivot
+    // about: flagged, not guessed.
+    if (!r.located) continue;
     geometry_msgs::TransformStamped t;
     t.header = msg->header;  // the image's stamp and optical frame
     t.child_frame_id = frame_prefix_ + std::to_string(r.id);
@@ -221,17 +225,19 @@ bool InsertionPointsNodelet::freezeSrv(FreezeInsertionPoint::Request& req, Freez
 
 void InsertionPointsNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   std::lock_guard<std::mutex> lock(mutex_);
-  int well = 0;
+  int well = 0, located = 0;
   for (auto const& r : last_reports_) {
     well += r.well_conditioned;
+    located += r.located;
     char v[160];
     std::snprintf(v, sizeof v, "views %zu, spread %.1f deg, rms %.1f mm, sigma %.1f mm%s", r.estimate.views,
                   r.estimate.conditioning * 180.0 / M_PI, r.estimate.rms_distance * 1e3,
-                  std::sqrt(std::max(0.0, r.estimate.covariance.trace())) * 1e3, r.well_conditioned ? "" : " (ill-conditioned)");
+                  std::sqrt(std::max(0.0, r.estimate.covariance.trace())) * 1e3, !r.well_conditioned ? " (ill-conditioned)" : r.located ? "" : " (not located yet: no frame)");
     stat.add(frame_prefix_ + std::to_string(r.id), v);
   }
   stat.add("insertion points", last_reports_.size());
   stat.add("well conditioned", well);
+  stat.add("located (published on tf)", located);
   if (stat.level == diagnostic_msgs::DiagnosticStatus::OK && !last_reports_.empty() && well == 0)
     stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "no well-conditioned insertion point yet");
 }

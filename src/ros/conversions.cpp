@@ -180,6 +180,7 @@ bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m
   m.rms_distance = e.rms_distance;
   m.conditioning = e.conditioning;
   m.well_conditioned = r.well_conditioned;
+  m.located = r.located;
   return true;
 }
 

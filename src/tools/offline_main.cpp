@@ -236,6 +236,7 @@ std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
       << ", \"views\": " << p.estimate.views << ", \"rms_m\": " << num(p.estimate.rms_distance)
       << ", \"conditioning\": " << num(p.estimate.conditioning)
       << ", \"well_conditioned\": " << (p.well_conditioned ? "true" : "false")
+      << ", \"located\": " << (p.located ? "true" : "false")
       << ", \"covariance\": " << vec(Eigen::Map<Eigen::Matrix<double, 9, 1> const>(cov.data())) << "}";
   }
   j << "], \"latency_ms\": " << num(out.latency_ms) << "}";

@@ -255,6 +255,41 @@ TEST(InsertionPointTracker, CovarianceCoversErrorsSharedByConsecutiveAxes) {
   EXPECT_LT(covered_model, static_cast<int>(0.6 * trials));  // the case is one the model alone fails
 }
 
+// A point seen over a narrow fan of axes is well conditioned (its image and the attachment hold)
+// before its position along the axes is known: it is located (a frame to pivot about) only once
+// its covariance's longest axis is under max_sigma.
+TEST(InsertionPointTracker, LocatedOnlyOnceThePositionIsKnown) {
+  std::mt19937_64 rng(21);
+  std::normal_distribution<double> N(0.0, 0.003);
+  auto feed = [&](InsertionPointTracker& t, int n, double spread) {
+    for (auto const& a : axesThrough(kTrocar, n, rng, spread)) {
+      Eigen::Vector3d const e1 = a.direction().unitOrthogonal(), e2 = a.direction().cross(e1);
+      t.update(*PluckerLine::fromPointDirection(kTrocar + N(rng) * e1 + N(rng) * e2, a.direction()));
+    }
+  };
+  InsertionPointTracker t;
+  InsertionPointTrackerOptions unlimited;
+  unlimited.max_sigma = 0.0;
+  InsertionPointTracker u(unlimited);
+  feed(t, 20, 0.004);
+  rng.seed(21);
+  feed(u, 20, 0.004);
+  auto sigmaMax = [](InsertionPointTracker const& x) {
+    return std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(x.estimate().covariance).eigenvalues()(2));
+  };
+  std::printf("[ narrow fan, 3 mm noise ] spread %.1f deg, longest sigma %.1f mm, error %.1f mm\n",
+              std::asin(t.estimate().conditioning) * 180 / M_PI, 1e3 * sigmaMax(t), 1e3 * (t.estimate().position - kTrocar).norm());
+  ASSERT_TRUE(t.wellConditioned());
+  EXPECT_GT(sigmaMax(t), t.options().max_sigma);
+  EXPECT_FALSE(t.located());
+  EXPECT_TRUE(u.located());  // max_sigma 0: located once well conditioned
+  feed(t, 300, 0.05);  // the instrument sweeps wider
+  std::printf("[ then a wide fan ] spread %.1f deg, longest sigma %.1f mm, error %.1f mm\n",
+              std::asin(t.estimate().conditioning) * 180 / M_PI, 1e3 * sigmaMax(t), 1e3 * (t.estimate().position - kTrocar).norm());
+  EXPECT_TRUE(t.located());
+  EXPECT_LT((t.estimate().position - kTrocar).norm(), t.options().max_sigma);
+}
+
 TEST(InsertionPointTracker, AnUncertainAxisDoesNotWidenTheGate) {
   // Exact axes through the point: its spread is nil, and the gate is the default one. An axis
   // whose own covariance is wide at the point (a short shaft) does not widen it to gate_max: a

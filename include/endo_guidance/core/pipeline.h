@@ -40,6 +40,7 @@ struct InsertionPointReport {
   InsertionPointEstimate estimate;
   Eigen::Vector3d image_point = Eigen::Vector3d::Zero();  ///< homogeneous pixel (w = 0: at infinity)
   bool well_conditioned = false;
+  bool located = false;  ///< InsertionPointTracker::located(): the position can be relied on
 };
 
 struct PipelineOutput {
