@@ -20,8 +20,9 @@ struct InsertionPointTrackerOptions {
   double min_conditioning = 0.035;   ///< rad (2 deg): below, the estimate is flagged ill-conditioned
   double max_sigma = 0.005;          ///< metres: a well-conditioned point is located (located()) once its
                                      ///< covariance's longest axis (1 sigma) is at most this (0: at once).
-                                     ///< Hard rendered scene: 9.9 mm at frame 100 for the point then 13.9 mm
-                                     ///< off, under 2.5 mm from frame 160; clean: at most 2.1 mm
+                                     ///< Hard rendered scene: points located from frames 135-290, at most
+                                     ///< 2.1 mm off once located (19.6 mm while only well conditioned);
+                                     ///< clean: from frames 28-45
   double default_axis_sigma = 0.001; ///< metres: assumed distance noise of an axis given without covariance
   double point_motion_sigma = 0.001; ///< metres: RMS motion of the trocar itself (breathing), added to
                                      ///< every axis's residual covariance
@@ -58,7 +59,9 @@ struct InsertionPointTrackerOptions {
 /// shaft share their errors, where blocks of correlation_views consecutive axes do (cluster-robust
 /// "sandwich" [Liang86]: with the blocks' weighted sums M_b and g_b = (M_b x~)_{1..3},
 /// \f$ \Sigma_c = \tfrac{B}{B-1} S^{-1} (\sum_b g_b g_b^\top) S^{-1} \f$, the model covariance scaled by
-/// the largest generalised eigenvalue of \f$ \Sigma_c \f$ over it when above 1, keeping its shape).
+/// the largest generalised eigenvalue of \f$ \Sigma_c \f$ over it when above 1, keeping its shape),
+/// and at least \f$ \mathrm{rms}^2 / (\mathrm{spread}^2\, G) \f$ along the mean axis, G the number of
+/// independent groups of correlation_views axes (the along-axis error of a shared error).
 /// Memory is O(1) in the axes, plus a
 /// bounded window of recent axes. Axes beyond the gate are rejected (not accumulated); a run of
 /// rejections re-initialises the estimate robustly (LMedS, Eq. (3)) from the most recent axes.
