@@ -86,6 +86,10 @@ struct Result {
   std::vector<double> hsv_ratio;  // --baseline: its cost over one HSV conversion, per frame
   std::vector<std::vector<double>> trocar_after_100;  // per instrument: nearest estimate's error (mm) in each frame from 100 on
   std::vector<std::vector<double>> trocar_maha_after_100;  // ... that error in units of the estimate's reported covariance
+  // per instrument, over all frames: the largest error of an estimate near it (within 20 mm) while
+  // well conditioned, and while located (published on tf); the first frame it is located
+  std::vector<double> worst_well, worst_located;
+  std::vector<int> first_located;
   std::vector<std::array<double, 3>> by_length;  // visible length (px), direction (deg), distance (relative) per found shaft
 };
 
@@ -210,6 +214,19 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
                       out.segmentation.regions[i].area);
         std::printf("\n");
       }
+    }
+    if (!baseline) {
+      R.worst_well.resize(scene.size(), 0.0);
+      R.worst_located.resize(scene.size(), 0.0);
+      R.first_located.resize(scene.size(), -1);
+      for (std::size_t i = 0; i < scene.size(); ++i)
+        for (auto const& p : out.insertion_points) {
+          double const e = (p.estimate.position - scene.meanTrocar(static_cast<int>(i))).norm() * 1e3;
+          if (e > 20.0) continue;  // another trocar's
+          if (p.well_conditioned) R.worst_well[i] = std::max(R.worst_well[i], e);
+          if (p.located) R.worst_located[i] = std::max(R.worst_located[i], e);
+          if (p.located && R.first_located[i] < 0) R.first_located[i] = k;
+        }
     }
     if (!baseline && k >= 100) {
       // The estimates' stability: their error in every frame from the 100th (the issue's "after
@@ -361,6 +378,9 @@ int main(int argc, char** argv) {
                     s.name.c_str(), i, r.frames - 1, percentile(r.trocar_after_100[i], 0.5), percentile(r.trocar_after_100[i], 0.95),
                     percentile(r.trocar_after_100[i], 1.0), percentile(r.trocar_maha_after_100[i], 0.5),
                     percentile(r.trocar_maha_after_100[i], 1.0));
+      for (std::size_t i = 0; i < r.worst_located.size(); ++i)
+        std::printf("  %s: trocar %zu located (on tf) from frame %d; its largest error while well conditioned %.2f mm, while located %.2f mm\n",
+                    s.name.c_str(), i, r.first_located[i], r.worst_well[i], r.worst_located[i]);
       // The axis is found from the convergence of the two lines: its direction (and so its
       // distance) error grows fast as the visible shaft gets shorter.
       for (auto const& [lo, hi] : {std::pair{0.0, 150.0}, std::pair{150.0, 300.0}, std::pair{300.0, 1e9}}) {
