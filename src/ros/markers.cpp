@@ -84,7 +84,8 @@ void appendShaftMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::
 void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header,
                          core::InsertionPointReport const& point, std::vector<Eigen::Vector3d> const& attached_points) {
   Eigen::Vector3d const& X = point.estimate.position;
-  float const g = point.well_conditioned ? 0.9f : 0.3f;
+  // Located (published on tf): bright; well conditioned only (not yet a frame): amber; else dim.
+  float const g = point.located ? 0.9f : point.well_conditioned ? 0.6f : 0.3f;
   auto sphere = base(header, "trocars", point.id, visualization_msgs::Marker::SPHERE, 1.0f, g, 0.1f, 1.0f);
   sphere.pose.position = pt(X);
   sphere.scale.x = sphere.scale.y = sphere.scale.z = 0.006;
@@ -105,7 +106,8 @@ void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs:
   auto text = base(header, "trocar_labels", point.id, visualization_msgs::Marker::TEXT_VIEW_FACING, 1.0f, 1.0f, 1.0f, 1.0f);
   text.pose.position = pt(X + Eigen::Vector3d(0, -0.01, 0));
   text.scale.z = 0.01;
-  text.text = "trocar_" + std::to_string(point.id);
+  text.text = "trocar_" + std::to_string(point.id) +
+              (point.located ? "" : point.well_conditioned ? " (not located yet)" : " (ill-conditioned)");
   out.push_back(text);
   if (!attached_points.empty()) {
     auto lines = base(header, "trocar_axes", point.id, visualization_msgs::Marker::LINE_LIST, 1.0f, g, 0.1f, 0.8f);
