@@ -19,8 +19,9 @@ void InsertionPointTracker::clearSums() {
   Bu_.setZero();
   sw_ = sw2_ = 0.0;
   accepted_ = consecutive_rejects_ = 0;
-  blocks_.clear();
-  open_ = {Eigen::Matrix4d::Zero(), 0};
+  blocks_T_.setZero();
+  blocks_w_ = blocks_w2_ = 0.0;
+  open_M_.setZero();
   open_n_ = 0;
 }
 
@@ -111,35 +112,41 @@ void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d con
   sw2_ = rho_ * rho_ * sw2_ + 1.0;
   ++accepted_;
   if (options_.correlation_views > 0) {
-    open_.M = rho_ * open_.M + Mk;
-    open_.end = accepted_;
+    blocks_T_ *= rho_ * rho_;
+    blocks_w_ *= rho_;
+    blocks_w2_ *= rho_ * rho_;
+    open_M_ = rho_ * open_M_ + Mk;
     if (++open_n_ >= options_.correlation_views) {
-      blocks_.push_back(open_);
-      open_ = {Eigen::Matrix4d::Zero(), accepted_};
+      Eigen::Matrix<double, 3, 4, Eigen::RowMajor> const A = open_M_.topRows<3>();
+      Eigen::Map<Eigen::Matrix<double, 12, 1> const> const a(A.data());
+      blocks_T_.noalias() += a * a.transpose();
+      blocks_w_ += 1.0;
+      blocks_w2_ += 1.0;
+      open_M_.setZero();
       open_n_ = 0;
-      // A block whose weight has fallen under 1e-3 (7 memory time constants) no longer counts.
-      std::size_t const horizon = static_cast<std::size_t>(7.0 * std::max(1.0, options_.memory_views));
-      while (!blocks_.empty() && accepted_ - blocks_.front().end > horizon) blocks_.pop_front();
     }
   }
 }
 
-// The cluster-robust covariance of the estimate (see the class comment): the blocks' score
-// vectors at x~, forgotten to the last axis, their scatter between S^-1 on both sides.
+// The cluster-robust covariance of the estimate (see the class comment): the scatter of the
+// blocks' score vectors g_b = f_b A_b x~ (the open block's too) between S^-1 on both sides, with
+// the small-sample factor B / (B - 1), B the effective number of blocks (*blocks).
 Eigen::Matrix3d InsertionPointTracker::clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt,
-                                                         std::size_t* blocks) const {
-  Eigen::Matrix3d meat = Eigen::Matrix3d::Zero();
-  std::size_t nb = 0;
-  auto add = [&](Block const& b) {
-    Eigen::Vector3d const g = std::pow(rho_, static_cast<double>(accepted_ - b.end)) * (b.M * xt).head<3>();
+                                                         double* blocks) const {
+  Eigen::Matrix3d meat;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) meat(i, j) = xt.dot(blocks_T_.block<4, 4>(4 * i, 4 * j) * xt);
+  double w = blocks_w_, w2 = blocks_w2_;
+  if (open_n_ > 0) {
+    Eigen::Vector3d const g = (open_M_ * xt).head<3>();
     meat += g * g.transpose();
-    ++nb;
-  };
-  for (auto const& b : blocks_) add(b);
-  if (open_n_ > 0) add(open_);
+    w += 1.0;
+    w2 += 1.0;
+  }
+  double const nb = w2 > 0.0 ? w * w / w2 : 0.0;
   *blocks = nb;
-  if (nb < 2) return Eigen::Matrix3d::Zero();
-  return Sinv * meat * Sinv * (static_cast<double>(nb) / static_cast<double>(nb - 1));
+  if (nb < 2.0) return Eigen::Matrix3d::Zero();
+  return Sinv * meat * Sinv * (nb / (nb - 1.0));
 }
 
 void InsertionPointTracker::solve() {
@@ -170,9 +177,9 @@ void InsertionPointTracker::solve() {
   e.covariance = Sinv * (sw2_ / sw_) * std::max(1.0, chi2);
   // Consecutive axes share their errors: the covariance must cover the scatter of blocks of them
   // too (from three blocks on; it is only ever widened, in the model's shape).
-  std::size_t nb = 0;
+  double nb = 0.0;
   Eigen::Matrix3d const Sc = options_.correlation_views > 0 ? clusterCovariance(Sinv, xt, &nb) : Eigen::Matrix3d::Zero();
-  if (nb >= 3) {
+  if (nb >= 3.0) {
     Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix3d> ge(Sc, e.covariance, Eigen::EigenvaluesOnly);
     if (ge.info() == Eigen::Success && std::isfinite(ge.eigenvalues()(2))) e.covariance *= std::max(1.0, ge.eigenvalues()(2));
   }

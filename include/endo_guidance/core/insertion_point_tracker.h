@@ -110,7 +110,7 @@ class InsertionPointTracker {
   void accumulate(Observation const& o, Eigen::Vector3d const& at);
   void clearSums();
   void solve();
-  Eigen::Matrix3d clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt, std::size_t* blocks) const;
+  Eigen::Matrix3d clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt, double* blocks) const;
   bool initialiseFrom(std::vector<Observation> const& obs);
 
   InsertionPointTrackerOptions options_;
@@ -121,14 +121,14 @@ class InsertionPointTracker {
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   Eigen::Matrix4d Bw_ = Eigen::Matrix4d::Zero();  ///< weighted normal matrix (relative to origin_)
   Eigen::Matrix4d Bu_ = Eigen::Matrix4d::Zero();  ///< unweighted
-  /// Blocks of correlation_views consecutive accepted axes: each one's weighted normal matrix
-  /// (forgotten like Bw_ up to its last axis) and the accepted_ count at that axis; the open block.
-  struct Block {
-    Eigen::Matrix4d M;
-    std::size_t end;
-  };
-  std::deque<Block> blocks_;
-  Block open_{Eigen::Matrix4d::Zero(), 0};
+  /// Blocks of correlation_views consecutive accepted axes, in O(1): with A_b the first three rows
+  /// of a completed block's weighted normal matrix (forgotten like Bw_ within it) and f_b its
+  /// forgetting weight since, blocks_T_ = sum f_b^2 vec(A_b) vec(A_b)^T (vec row-major, 12), so that
+  /// sum_b f_b^2 (A_b x~)(A_b x~)^T is its contraction with x~; blocks_w_ = sum f_b, blocks_w2_ =
+  /// sum f_b^2 (the effective number of blocks); the open block's sum and size.
+  Eigen::Matrix<double, 12, 12> blocks_T_ = Eigen::Matrix<double, 12, 12>::Zero();
+  double blocks_w_ = 0.0, blocks_w2_ = 0.0;
+  Eigen::Matrix4d open_M_ = Eigen::Matrix4d::Zero();
   std::size_t open_n_ = 0;
   double sw_ = 0.0, sw2_ = 0.0;
   std::size_t accepted_ = 0, rejected_ = 0, consecutive_rejects_ = 0;
