@@ -3,7 +3,7 @@
 # endo_guidance_synthetic) through replay.launch on a private master, then prints the trocar
 # estimates with their errors and saves the last overlay (build/demo/overlay.png).
 # Usage: scripts/replay_demo.sh [--check TOL_MM] [roslaunch args...]
-#   --check TOL_MM: exit 1 unless every true trocar is estimated (well conditioned) within TOL_MM.
+#   --check TOL_MM: exit 1 unless every true trocar is estimated (located: on tf) within TOL_MM.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 CHECK=()

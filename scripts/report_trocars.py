@@ -52,13 +52,13 @@ def main():
         x = np.array([q.position.x, q.position.y, q.position.z])
         err = np.linalg.norm(truth - x, axis=1)
         i = int(np.argmin(err))
-        worst = max(worst, err[i]) if q.well_conditioned else worst
+        worst = max(worst, err[i]) if q.located else worst
         sigma = np.sqrt(max(np.linalg.eigvalsh(np.array(q.covariance).reshape(3, 3))[-1], 0.0))
         state_s = ("located" if q.located else "well conditioned, NOT LOCATED") if q.well_conditioned else "ILL-CONDITIONED"
         print(f"  trocar_{q.id}: ({x[0]*1e3:7.1f} {x[1]*1e3:7.1f} {x[2]*1e3:7.1f})  views {q.views:4d}  "
               f"spread {np.degrees(q.conditioning):5.1f} deg  sigma {sigma*1e3:4.1f} mm  {state_s}"
               f"  error vs true trocar {i}: {err[i]*1e3:.2f} mm")
-    est = [np.array([q.position.x, q.position.y, q.position.z]) for q in p.points if q.well_conditioned]
+    est = [np.array([q.position.x, q.position.y, q.position.z]) for q in p.points if q.located]
     per_truth = [min((np.linalg.norm(t - e) for e in est), default=np.inf) for t in truth]
     found = sum(1 for e in per_truth if e < 0.005)
     print(f"{found} of {len(truth)} true trocars estimated (within 5 mm); worst error {worst*1e3:.2f} mm")

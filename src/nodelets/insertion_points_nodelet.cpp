@@ -240,6 +240,8 @@ void InsertionPointsNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWra
   stat.add("located (published on tf)", located);
   if (stat.level == diagnostic_msgs::DiagnosticStatus::OK && !last_reports_.empty() && well == 0)
     stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "no well-conditioned insertion point yet");
+  else if (stat.level == diagnostic_msgs::DiagnosticStatus::OK && well > 0 && located == 0)
+    stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "no insertion point located yet (none on tf for the servo)");
 }
 
 }  // namespace endo_guidance
