@@ -11,6 +11,7 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -413,9 +414,12 @@ int main(int argc, char** argv) {
       }
       for (auto const& p : last.insertion_points) {
         Eigen::Vector3d const& x = p.estimate.position;
-        std::fprintf(stderr, "  id %d: (%.1f, %.1f, %.1f) mm, %zu views, rms %.2f mm, spread %.1f deg%s", p.id, x.x() * 1e3, x.y() * 1e3,
-                     x.z() * 1e3, p.estimate.views, p.estimate.rms_distance * 1e3,
-                     std::asin(std::min(1.0, p.estimate.conditioning)) * 180.0 / M_PI, p.well_conditioned ? "" : " (ill-conditioned)");
+        double const sigma = std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(p.estimate.covariance,
+                                                                                                 Eigen::EigenvaluesOnly).eigenvalues()(2)));
+        std::fprintf(stderr, "  id %d: (%.1f, %.1f, %.1f) mm, %zu views, rms %.2f mm, spread %.1f deg, sigma %.2f mm%s", p.id, x.x() * 1e3,
+                     x.y() * 1e3, x.z() * 1e3, p.estimate.views, p.estimate.rms_distance * 1e3,
+                     std::asin(std::min(1.0, p.estimate.conditioning)) * 180.0 / M_PI, sigma * 1e3,
+                     !p.well_conditioned ? " (ill-conditioned)" : p.located ? "" : " (not located yet)");
         if (!truth.empty()) {
           double best = 1e9;
           for (auto const& t : truth) best = std::min(best, (t - x).norm());
