@@ -237,16 +237,21 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   EXPECT_LT(worst_axis_deg, compressed_ ? 10.0 : 3.0);  // JPEG (q95) blurs a short shaft's edges
   auto const p = points_.get();
   ASSERT_TRUE(p);
-  int well = 0;
+  int well = 0, located = 0;
   for (auto const& q : p->points) {
     ASSERT_TRUE(finite({q.position.x, q.position.y, q.position.z, q.image_point[0], q.image_point[1], q.image_point[2]}));
+    ASSERT_TRUE(std::all_of(q.covariance.begin(), q.covariance.end(), [](double c) { return std::isfinite(c); }));
     well += q.well_conditioned;
+    located += q.located;
+    EXPECT_TRUE(q.well_conditioned || !q.located);  // located implies well conditioned
   }
   EXPECT_EQ(well, 3);
-  // tf: optical frame -> trocar_<id> at the last image stamp, each within 3 mm of a true trocar.
+  EXPECT_EQ(located, 3);
+  // tf: optical frame -> trocar_<id> (located points only) at the last image stamp, each within 3
+  // mm of a true trocar.
   int found = 0;
   for (auto const& q : p->points) {
-    if (!q.well_conditioned) continue;
+    if (!q.located) continue;
     geometry_msgs::TransformStamped tr;
     ASSERT_NO_THROW(tr = buffer.lookupTransform(kFrame, "trocar_" + std::to_string(q.id), p->header.stamp, ros::Duration(1.0)));
     Eigen::Vector3d const X(tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z);

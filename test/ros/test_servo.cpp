@@ -80,7 +80,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   double bd = 0.01;
   for (auto const& p : est->points) {
     double const d = (Eigen::Vector3d(p.position.x, p.position.y, p.position.z) - T0).norm();
-    if (p.well_conditioned && d < bd) bd = d, id = p.id;
+    if (p.located && d < bd) bd = d, id = p.id;  // the servo pivots about a located (tf) point
   }
   ASSERT_GE(id, 0) << "no estimated trocar within 10 mm of arm_0's";
 

@@ -180,7 +180,7 @@ TEST(SimulatedSurgery, EstimatedTrocarsMatchTheTruth) {
   ASSERT_TRUE(truth);
   est = ros::topic::waitForMessage<InsertionPointArray>("endoscope/insertion_points", nh, ros::Duration(5.0));
   for (auto const& p : est->points) {
-    if (!p.well_conditioned) continue;
+    if (!p.located) continue;  // only located points are on tf
     auto const t = buffer.lookupTransform("endoscope_optical_frame", "trocar_" + std::to_string(p.id), ros::Time(0), ros::Duration(2.0));
     Eigen::Vector3d const X(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
     double best = 1e9;
