@@ -153,7 +153,8 @@ void InsertionPointTracker::solve() {
   InsertionPointEstimate e;
   e.views = std::min<std::size_t>(accepted_, static_cast<std::size_t>(std::llround(sw_)));
   Eigen::Matrix3d const Su = Bu_.topLeftCorner<3, 3>();  // sum (I - d d^T)
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Su / std::max(sw_, 1e-300), Eigen::EigenvaluesOnly);
+  // (its eigenvector of the smallest eigenvalue: the mean axis direction, for the floor below)
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Su / std::max(sw_, 1e-300));
   e.conditioning = std::sqrt(std::max(0.0, es.eigenvalues()(0)));
   Eigen::Matrix3d const S = Bw_.topLeftCorner<3, 3>();
   Eigen::Vector3d const b = Bw_.topRightCorner<3, 1>();
@@ -189,8 +190,7 @@ void InsertionPointTracker::solve() {
   // cannot see errors shared by all of them (a slow sweep): hard rendered scene, a point 19.6 mm
   // off claimed 3.3 mm without this floor.
   if (options_.correlation_views > 0 && e.conditioning > 0.0) {
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eu(Su);
-    Eigen::Vector3d const u = eu.eigenvectors().col(0);  // the least constrained direction: the mean axis
+    Eigen::Vector3d const u = es.eigenvectors().col(0);  // the least constrained direction: the mean axis
     double const groups = std::max(1.0, n_eff / static_cast<double>(options_.correlation_views));
     double const floor2 = e.rms_distance * e.rms_distance / (e.conditioning * e.conditioning * groups);
     double const along = u.dot(e.covariance * u);

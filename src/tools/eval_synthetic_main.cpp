@@ -220,20 +220,17 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       R.worst_well.resize(scene.size(), 0.0);
       R.worst_located.resize(scene.size(), 0.0);
       R.first_located.resize(scene.size(), -1);
-      for (std::size_t i = 0; i < scene.size(); ++i)
-        for (auto const& p : out.insertion_points) {
+      for (auto const& p : out.insertion_points) {
+        double nearest = std::numeric_limits<double>::infinity();
+        for (std::size_t i = 0; i < scene.size(); ++i) {
           double const e = (p.estimate.position - scene.meanTrocar(static_cast<int>(i))).norm() * 1e3;
+          nearest = std::min(nearest, e);
           if (e > 20.0) continue;  // another trocar's
           if (p.well_conditioned) R.worst_well[i] = std::max(R.worst_well[i], e);
           if (p.located) R.worst_located[i] = std::max(R.worst_located[i], e);
           if (p.located && R.first_located[i] < 0) R.first_located[i] = k;
         }
-      for (auto const& p : out.insertion_points) {
-        if (!p.located) continue;
-        double nearest = std::numeric_limits<double>::infinity();
-        for (std::size_t i = 0; i < scene.size(); ++i)
-          nearest = std::min(nearest, (p.estimate.position - scene.meanTrocar(static_cast<int>(i))).norm() * 1e3);
-        R.located_error_mm = std::max(R.located_error_mm, nearest);
+        if (p.located) R.located_error_mm = std::max(R.located_error_mm, nearest);
       }
     }
     if (!baseline && k >= 100) {
