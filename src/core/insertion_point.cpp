@@ -6,6 +6,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 
@@ -52,6 +53,12 @@ void finishEstimate(std::vector<PluckerLine> const& axes, std::vector<double> co
 }
 
 }  // namespace
+
+double InsertionPointEstimate::longestSigma() const {
+  if (!covariance.allFinite()) return std::numeric_limits<double>::infinity();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(covariance, Eigen::EigenvaluesOnly);
+  return std::sqrt(std::max(0.0, es.eigenvalues()(2)));
+}
 
 double axesAngularSpread(std::vector<PluckerLine> const& axes, std::vector<double> const& w) {
   if (axes.size() < 2) return 0.0;

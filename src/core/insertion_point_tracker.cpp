@@ -76,10 +76,7 @@ bool InsertionPointTracker::wellConditioned() const {
 
 bool InsertionPointTracker::located() const {
   if (!wellConditioned()) return false;
-  if (!(options_.max_sigma > 0.0)) return true;
-  if (!estimate_.covariance.allFinite()) return false;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(estimate_.covariance, Eigen::EigenvaluesOnly);
-  return es.eigenvalues()(2) <= options_.max_sigma * options_.max_sigma;
+  return !(options_.max_sigma > 0.0) || estimate_.longestSigma() <= options_.max_sigma;
 }
 
 void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d const& at) {

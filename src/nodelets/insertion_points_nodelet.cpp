@@ -230,9 +230,9 @@ void InsertionPointsNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWra
     well += r.well_conditioned;
     located += r.located;
     char v[160];
-    std::snprintf(v, sizeof v, "views %zu, spread %.1f deg, rms %.1f mm, sigma %.1f mm%s", r.estimate.views,
+    std::snprintf(v, sizeof v, "views %zu, spread %.1f deg, rms %.1f mm, longest sigma %.1f mm%s", r.estimate.views,
                   r.estimate.conditioning * 180.0 / M_PI, r.estimate.rms_distance * 1e3,
-                  std::sqrt(std::max(0.0, r.estimate.covariance.trace())) * 1e3, !r.well_conditioned ? " (ill-conditioned)" : r.located ? "" : " (not located yet: no frame)");
+                  r.estimate.longestSigma() * 1e3, !r.well_conditioned ? " (ill-conditioned)" : r.located ? "" : " (not located yet: no frame)");
     stat.add(frame_prefix_ + std::to_string(r.id), v);
   }
   stat.add("insertion points", last_reports_.size());

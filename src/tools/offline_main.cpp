@@ -11,7 +11,6 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -414,8 +413,7 @@ int main(int argc, char** argv) {
       }
       for (auto const& p : last.insertion_points) {
         Eigen::Vector3d const& x = p.estimate.position;
-        double const sigma = std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(p.estimate.covariance,
-                                                                                                 Eigen::EigenvaluesOnly).eigenvalues()(2)));
+        double const sigma = p.estimate.longestSigma();
         std::fprintf(stderr, "  id %d: (%.1f, %.1f, %.1f) mm, %zu views, rms %.2f mm, spread %.1f deg, sigma %.2f mm%s", p.id, x.x() * 1e3,
                      x.y() * 1e3, x.z() * 1e3, p.estimate.views, p.estimate.rms_distance * 1e3,
                      std::asin(std::min(1.0, p.estimate.conditioning)) * 180.0 / M_PI, sigma * 1e3,

@@ -29,6 +29,8 @@ struct InsertionPointEstimate {
   double conditioning = 0.0;                               ///< RMS angular spread of the axes, rad
   std::vector<int> inliers;                                ///< indices into the input (robust form)
   bool ok() const { return status == InsertionPointStatus::kOk; }
+  /// The covariance's longest axis (1 sigma, metres); +inf when it is not finite.
+  double longestSigma() const;
 };
 
 /// RMS angular spread (radians) of a set of axis directions about their mean direction (sign of
