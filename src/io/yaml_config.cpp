@@ -91,6 +91,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/seed_threshold", i(S.seeds.threshold)},
       {"segmentation/seed_near_threshold", i(S.seeds.near_threshold)},
       {"segmentation/seed_relative_threshold", d(S.seeds.relative_threshold)},
+      {"segmentation/seed_run_floor", i(S.seeds.run_floor)},
       {"segmentation/dark_border_level", Setter([&S](YAML::Node const& n) {
          S.seeds.dark_border_level = S.regions.dark_border_level = n.as<double>();
        })},

@@ -98,6 +98,7 @@ void SegmentationNodelet::onInit() {
   c.seed_threshold = S.seeds.threshold;
   c.seed_near_threshold = S.seeds.near_threshold;
   c.seed_relative_threshold = S.seeds.relative_threshold;
+  c.seed_run_floor = S.seeds.run_floor;
   c.max_angle_deg = S.contours.max_angle_deg;
   c.min_length_px = S.contours.min_length_px;
   c.min_width_px = S.contours.min_width_px;
@@ -156,6 +157,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.seeds.threshold = c.seed_threshold;
   S.seeds.near_threshold = c.seed_near_threshold;
   S.seeds.relative_threshold = c.seed_relative_threshold;
+  S.seeds.run_floor = c.seed_run_floor;
   S.contours.max_angle_deg = c.max_angle_deg;
   S.contours.min_length_px = c.min_length_px;
   S.contours.min_width_px = c.min_width_px;

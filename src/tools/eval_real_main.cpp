@@ -187,15 +187,16 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
           d.push_back(e);
           signed_d.push_back(std::abs(e0) < std::abs(e1) ? e0 : e1);
         }
-      if (!d_all.empty()) st.line_median_all_px.push_back(percentile(d_all, 0.5));
-      if (!d.empty()) {
-        st.line_median_px.push_back(percentile(d, 0.5));
-        if (verbose)
-          std::printf("  hit %s/%s id %d: line to mask sides median %.2f px (signed, + = mask inside the lines: %.2f; whole boundary %.2f), residual %.2f px, width %.1f px at the entry, %.1f at the tip\n",
-                      f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
-                      percentile(signed_d, 0.5), percentile(d_all, 0.5), c.residual_px, shaftWidthAt(c, c.entry_px), shaftWidthAt(c, c.tip_px));
-        st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
-      }
+      // A detection matched to the shaft with none of the mask's sides within 25 px of its lines
+      // (a strip along its edge) counts as 25 px off, not as no measurement.
+      st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
+      st.line_median_all_px.push_back(d_all.empty() ? 25.0 : percentile(d_all, 0.5));
+      st.line_median_px.push_back(d.empty() ? 25.0 : percentile(d, 0.5));
+      if (verbose)
+        std::printf("  hit %s/%s id %d: line to mask sides median %.2f px (signed, + = mask inside the lines: %.2f; whole boundary %.2f), residual %.2f px, width %.1f px at the entry, %.1f at the tip\n",
+                    f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
+                    signed_d.empty() ? 0.0 : percentile(signed_d, 0.5), st.line_median_all_px.back(), c.residual_px,
+                    shaftWidthAt(c, c.entry_px), shaftWidthAt(c, c.tip_px));
     }
     for (int id : ids) st.found += found.count(id) ? 1 : 0;
     // Why each missed shaft was missed: no seed on it, or the fate of the regions grown from it.

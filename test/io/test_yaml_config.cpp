@@ -81,6 +81,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
   EXPECT_EQ(shipped.pose.min_distance, defaults.pose.min_distance);
   EXPECT_EQ(shipped.segmentation.seeds.relative_threshold, defaults.segmentation.seeds.relative_threshold);
+  EXPECT_EQ(shipped.segmentation.seeds.run_floor, defaults.segmentation.seeds.run_floor);
   EXPECT_EQ(shipped.segmentation.seeds.dark_border_level, defaults.segmentation.seeds.dark_border_level);
   EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
   EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
