@@ -232,12 +232,16 @@ void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vect
 }
 
 // Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft
-// at the end): the centroid of the slope in a fixed window of +-2.5 px about its peak -- exact
-// for a box-filtered (anti-aliased) step under bilinear sampling and unbiased for any symmetric
-// blur, whereas a parabola on the peak, or a lobe cut at a fraction of it, is biased by up to
-// 0.15 px on sharp edges. nullopt: no descent steeper than min_slope (per sample pair), or the
-// window would be cut by the profile's end (the centroid would be biased).
-std::optional<double> steepestDescent(std::vector<float> const& prof, double ds, double min_slope) {
+// at the end): the centroid of the slope about its peak, within +-2.5 px -- exact for a
+// box-filtered (anti-aliased) step under bilinear sampling and unbiased for any symmetric blur,
+// whereas a parabola on the peak, or weights cut at a fraction of it, is biased by up to 0.15 px
+// on sharp edges (the slope of such a step is a two-level staircase). `lobe_floor` >= 0: only the
+// contiguous lobe of the peak whose slope stays above lobe_floor times the peak counts (whole
+// samples, uncut), not another structure's slope further in the window (a vessel or a glare
+// speck touching the edge: 0.05-0.13 px outward over whole stretches of a rendered shaft); < 0:
+// every descending sample of the window. nullopt: no descent steeper than min_slope (per sample
+// pair), or the window would be cut by the profile's end (the centroid would be biased).
+std::optional<double> steepestDescent(std::vector<float> const& prof, double ds, double min_slope, double lobe_floor) {
   int const ns = static_cast<int>(prof.size());
   int bi = -1;
   float bg = -static_cast<float>(min_slope);
@@ -248,8 +252,15 @@ std::optional<double> steepestDescent(std::vector<float> const& prof, double ds,
   }
   int const wr = static_cast<int>(std::lround(2.5 / ds));
   if (bi < 0 || bi - wr < 1 || bi + wr > ns - 2) return std::nullopt;
+  int lo = bi - wr, hi = bi + wr;
+  if (lobe_floor >= 0.0) {
+    float const floor = static_cast<float>(lobe_floor) * -bg;
+    auto slope = [&](int i) { return prof[i - 1] - prof[i + 1]; };
+    for (lo = bi; lo > bi - wr && slope(lo - 1) > floor;) --lo;
+    for (hi = bi; hi < bi + wr && slope(hi + 1) > floor;) ++hi;
+  }
   double sw = 0.0, swx = 0.0;
-  for (int i = bi - wr; i <= bi + wr; ++i) {
+  for (int i = lo; i <= hi; ++i) {
     double const g = -(prof[i + 1] - prof[i - 1]);
     if (g <= 0.0) continue;
     sw += g;
@@ -343,8 +354,8 @@ class EdgeProfiler {
     // steepest descent, not the first seen from inside --
     // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
     // little chroma contrast: then its drop in brightness is used.
-    auto at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_);
-    if (!at && need_value_) at = steepestDescent(val_, ds_, p_.brightness_fallback_contrast * 2.0 * ds_);
+    auto at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_, p_.edge_lobe_floor);
+    if (!at && need_value_) at = steepestDescent(val_, ds_, p_.brightness_fallback_contrast * 2.0 * ds_, p_.edge_lobe_floor);
     if (!at) return std::nullopt;
     return Eigen::Vector2d(base + (-h_ + *at * ds_) * n);
   }
@@ -399,6 +410,7 @@ ContourLinesParams widePass(ContourLinesParams const& p) {
   ContourLinesParams wide = p;
   wide.refine_halfwidth_px = p.coarse_halfwidth_px;
   wide.profile_step_px = 2.0 * p.profile_step_px;
+  wide.edge_lobe_floor = -1.0;  // it recentres and scores: the whole window (the lobe alone there: robotic Dataset 1 -4 shafts)
   return wide;
 }
 

@@ -108,6 +108,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
       {"segmentation/edge_red_green_weight", d(S.contours.edge_red_green_weight)},
       {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
+      {"segmentation/edge_lobe_floor", d(S.contours.edge_lobe_floor)},
       {"segmentation/min_fill", d(S.contours.min_fill)},
       {"segmentation/min_parallel_side_ratio", d(S.contours.min_parallel_side_ratio)},
       {"segmentation/min_elongation", d(S.contours.min_elongation)},

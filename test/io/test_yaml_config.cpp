@@ -93,6 +93,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.resought_min_tip_depth_px, defaults.segmentation.resought_min_tip_depth_px);
   EXPECT_EQ(shipped.segmentation.resought_max_widening, defaults.segmentation.resought_max_widening);
   EXPECT_EQ(shipped.segmentation.contours.extend_max_misses, defaults.segmentation.contours.extend_max_misses);
+  EXPECT_EQ(shipped.segmentation.contours.edge_lobe_floor, defaults.segmentation.contours.edge_lobe_floor);
   EXPECT_EQ(shipped.segmentation.tracking.detect_every, defaults.segmentation.tracking.detect_every);
   EXPECT_EQ(shipped.segmentation.tracking.max_width_change, defaults.segmentation.tracking.max_width_change);
   EXPECT_EQ(shipped.segmentation.tracking.coarse_step_px, defaults.segmentation.tracking.coarse_step_px);

@@ -50,6 +50,9 @@ struct ContourLinesParams {
   double profile_step_px = 0.5;   ///< full-res: sampling along each profile (the wide pass uses 2x)
   double score_step_px = 6.0;     ///< full-res: profile spacing when scoring candidate regions
   double min_edge_contrast = 2.5; ///< edgeChannel() units per px: weaker profiles carry no edge
+  double edge_lobe_floor = 0.05;  ///< final pass: an edge is the centroid of its slope's lobe down to this fraction
+                                  ///< of the peak (within +-2.5 px), not of every descent in the window
+                                  ///< (< 0: the window; the wide pass always takes the window)
   double edge_red_green_weight = 0.0;  ///< w of edgeChannel(): 0 locates the edges in the chroma alone (opt-in: README, Accuracy)
   double brightness_fallback_contrast = 0.0;  ///< grey levels per px: a profile without a chroma edge
                                               ///< takes a brightness drop this steep (0: never; 8 found
