@@ -253,16 +253,16 @@ std::optional<double> steepestDescent(std::vector<float> const& prof, double ds,
   }
   int const wr = static_cast<int>(std::lround(2.5 / ds));
   if (bi < 0 || bi - wr < 1 || bi + wr > ns - 2) return std::nullopt;
+  auto slope = [&](int i) { return prof[i - 1] - prof[i + 1]; };  // descending: positive
   int lo = bi - wr, hi = bi + wr;
   if (lobe_floor >= 0.0) {
     float const floor = static_cast<float>(lobe_floor) * -bg;
-    auto slope = [&](int i) { return prof[i - 1] - prof[i + 1]; };
     for (lo = bi; lo > bi - wr && slope(lo - 1) > floor;) --lo;
     for (hi = bi; hi < bi + wr && slope(hi + 1) > floor;) ++hi;
   }
   double sw = 0.0, swx = 0.0;
   for (int i = lo; i <= hi; ++i) {
-    double const g = -(prof[i + 1] - prof[i - 1]);
+    double const g = slope(i);
     if (g <= 0.0) continue;
     sw += g;
     swx += g * i;
