@@ -440,8 +440,13 @@ bool stripContrastFullRes(AcrossSamples s, StripSearchParams const& p) {
   double const mi = median(in);
   bool const matte = specular < p.max_specular_fraction * static_cast<double>(in.size());
   double const max_ratio = matte ? p.max_full_res_ratio_matte : p.max_full_res_ratio;
-  for (auto& o : out)
-    if (o.size() >= 4 && mi > max_ratio * median(o)) return false;
+  double const q = std::clamp(p.full_res_outside_quantile, 0.0, 1.0);
+  for (auto& o : out) {
+    if (o.size() < 4) continue;
+    auto const k = std::min(o.size() - 1, static_cast<std::size_t>(q * static_cast<double>(o.size())));
+    std::nth_element(o.begin(), o.begin() + static_cast<long>(k), o.end());
+    if (mi > max_ratio * static_cast<double>(o[k])) return false;
+  }
   return true;
 }
 

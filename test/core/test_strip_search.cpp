@@ -251,6 +251,34 @@ TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
   EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp, 0.f), cv::Exception);
 }
 
+// The tissue's level beside a line is an upper quantile of its samples, not their median: a grey
+// shaft with a grey blob (gauze) along 60 % of one side is accepted (it fails with the median);
+// the same strip on pale tissue all along both sides is still refused.
+TEST(StripSearch, FullResolutionContrastAllowsABlobAlongPartOfASide) {
+  cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
+  ApparentContour c;
+  c.entry_px = {0, 240};
+  c.tip_px = {400, 240};
+  c.lines = {Eigen::Vector3d(0, 1, -220), Eigen::Vector3d(0, -1, 260)};  // shaft between v = 220 and 260
+  img(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
+  cv::Mat gauze = img.clone();
+  gauze(cv::Rect(0, 160, 240, 60)).setTo(cv::Scalar(150, 150, 152));  // above the shaft, 60 % of its length
+  StripSearchParams sp;
+  EXPECT_TRUE(stripContrastFullRes(gauze, c, sp, 0.f));
+  StripSearchParams median = sp;
+  median.full_res_outside_quantile = 0.5;
+  EXPECT_FALSE(stripContrastFullRes(gauze, c, median, 0.f)) << "the blob does not veto the median: no test";
+  cv::Mat pale(480, 640, CV_8UC3, cv::Scalar(140, 141, 144));  // pale tissue, as grey as the strip: a fold
+  pale(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
+  EXPECT_FALSE(stripContrastFullRes(pale, c, sp, 0.f));
+  // Out-of-range quantiles are clamped: 0 (the least chromatic sample) and 1 (the most).
+  StripSearchParams lo = sp, hi = sp;
+  lo.full_res_outside_quantile = -1.0;
+  hi.full_res_outside_quantile = 2.0;
+  EXPECT_FALSE(stripContrastFullRes(gauze, c, lo, 0.f));
+  EXPECT_TRUE(stripContrastFullRes(gauze, c, hi, 0.f));
+}
+
 // The SIMD walk (four rays per step) gives every ray exactly the scalar walk's score and length:
 // rays of every angle from the border and from inside, on a gradient of random blobs and edges
 // in a circular field of view (rays that leave the image, the view, end on a weak edge, or run
