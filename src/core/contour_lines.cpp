@@ -928,6 +928,35 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   return fit;
 }
 
+namespace {
+// The steepest crossing of the view's border by the contour's axis or either line, as the sine
+// of its angle with the border (the inward unit normal dotted with axis_dir, the direction into
+// the view): each line is followed back from its foot of `entry` to where it leaves the view,
+// within two widths (w_proc, processing px); the axis falls back to the entry itself.
+double enteringSine(ApparentContour const& c, FieldOfView const& fov, Eigen::Vector2d const& entry,
+                    Eigen::Vector2d const& axis_dir, double w_proc, int scale) {
+  int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
+  double best = -1.0;
+  for (int k = 0; k < 3; ++k) {
+    ImageLine const l = k == 0 ? imageAxis(c) : c.lines[static_cast<std::size_t>(k - 1)];
+    Eigen::Vector2d d(-l.y(), l.x());
+    if (k == 0 || d.norm() < 1e-12) d = axis_dir;
+    d.normalize();
+    if (d.dot(axis_dir) < 0.0) d = -d;
+    std::optional<Eigen::Vector2d> q = walkToEdge(fov, toProcessing(footOnLine(l, entry), scale), d, kmax);
+    if (!q) {
+      if (k > 0) continue;  // a line that never meets the view near the entry crosses no border there
+      q = toProcessing(entry, scale);  // no exit found: the seed
+    }
+    Eigen::Vector2d const g =
+        depthGradient(fov, cv::Point(static_cast<int>(std::lround(q->x())), static_cast<int>(std::lround(q->y()))));
+    if (g.norm() <= 1e-6) return 1.0;  // no border in reach: nothing to run along
+    best = std::max(best, g.normalized().dot(axis_dir));
+  }
+  return best;
+}
+}  // namespace
+
 ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView const& fov, cv::Mat const& bgr,
                          int scale, ContourLinesParams const& p) {
   ContourFit fit;
@@ -1028,16 +1057,12 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   // the other border than the one the shaft crosses (a shaft entering from the side close to
   // the bottom seeds on the bottom). The exit is searched within two widths of the entry, so a
   // band along the border (vignetted rim) still meets the border it runs along.
-  {
-    double const w_proc = std::max(1.0, width_at[0] / scale);
-    auto const ax = footOnLine(imageAxis(c), entry);
-    int const kmax = static_cast<int>(std::ceil(std::max(10.0, 2.0 * w_proc)));
-    Eigen::Vector2d const q = walkToEdge(fov, toProcessing(ax, scale), axis_dir, kmax)
-                                  .value_or(toProcessing(entry, scale));  // no exit found: the seed
-    Eigen::Vector2d const g =
-        depthGradient(fov, cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))));
-    if (g.norm() > 1e-6 && g.normalized().dot(axis_dir) < p.min_entry_sine) return reject(ContourRejection::kAlongBorder);
-  }
+  // A shaft that enters through a corner crosses two borders: its axis can meet one at a grazing
+  // angle while a contour line crosses the other squarely (hard scene frames 11 and 234). It
+  // enters if its axis or either line crosses the border steeply enough; a band along one border
+  // has all three along it.
+  if (enteringSine(c, fov, entry, axis_dir, std::max(1.0, width_at[0] / scale), scale) < p.min_entry_sine)
+    return reject(ContourRejection::kAlongBorder);
   // Shape: a shaft region fills the strip between its lines and stays inside it, and the strip
   // is elongated. Tissue blobs that happen to have two straight-ish sides fail here.
   {

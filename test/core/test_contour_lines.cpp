@@ -673,3 +673,36 @@ TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
   }
   EXPECT_EQ(found, 1);
 }
+
+// A shaft entering through a corner of the view: its axis meets the bottom border at 20 deg
+// (sine 0.34) and its upper line crosses the right border squarely. With a minimum entry sine of
+// 0.5 it is still found: a contour line crosses a border steeply. The same shaft moved left, so
+// that its axis and both lines cross the bottom border at 20 deg, is refused: it runs along the
+// border.
+TEST(ContourLines, AShaftEnteringThroughACornerEntersTheView) {
+  double const a = 20.0 * M_PI / 180.0, half = 30.0 / std::cos(a);  // 60 px wide
+  auto render = [&](double x_bottom) {  // the axis meets the bottom row at x_bottom
+    cv::Mat img(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+    cv::RNG(5).fill(img, cv::RNG::NORMAL, cv::Scalar(60, 70, 170), cv::Scalar(4, 4, 4));
+    auto y = [&](double x, double off) { return 479.0 - std::tan(a) * (x_bottom - x) + off; };
+    double const x0 = x_bottom - 350.0, x1 = x_bottom + 200.0;  // tip, and far outside the view
+    std::vector<cv::Point> poly;
+    for (auto const& [x, off] : {std::pair{x0, -half}, std::pair{x1, -half}, std::pair{x1, half}, std::pair{x0, half}})
+      poly.emplace_back(static_cast<int>(std::lround(x * 16)), static_cast<int>(std::lround(y(x, off) * 16)));
+    cv::fillConvexPoly(img, poly, cv::Scalar(140, 140, 142), cv::LINE_AA, 4);
+    return img;
+  };
+  SegmentationParams sp;
+  sp.contours.min_entry_sine = 0.5;
+  auto found = [&](cv::Mat const& img, SegmentationParams const& p) {
+    auto const res = InstrumentSegmenter(p).process(img);
+    for (auto const& c : res.contours)
+      if (std::abs(std::atan2(c.tip_px.y() - c.entry_px.y(), c.tip_px.x() - c.entry_px.x()) - (-M_PI + a)) < 0.05) return true;
+    return false;
+  };
+  cv::Mat const corner = render(600.0);
+  EXPECT_TRUE(found(corner, sp));
+  cv::Mat const bottom = render(420.0);
+  EXPECT_FALSE(found(bottom, sp));
+  EXPECT_TRUE(found(bottom, SegmentationParams())) << "not found at the default entry sine either: no test";
+}
