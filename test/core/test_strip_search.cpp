@@ -215,14 +215,22 @@ TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
   EXPECT_LT(onShaft(r2.contours[0]), 0.5);
 }
 
+namespace {
+// A horizontal shaft's contour from the left border to u = 400, between v = 220 and 260.
+ApparentContour horizontalShaft() {
+  ApparentContour c;
+  c.entry_px = {0, 240};
+  c.tip_px = {400, 240};
+  c.lines = {Eigen::Vector3d(0, 1, -220), Eigen::Vector3d(0, -1, 260)};
+  return c;
+}
+}  // namespace
+
 // Full-resolution contrast: a band of white specular speckles on red tissue (grey once averaged
 // at the processing scale) is refused; a grey shaft on the same tissue is accepted.
 TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
   cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
-  ApparentContour c;
-  c.entry_px = {0, 240};
-  c.tip_px = {400, 240};
-  c.lines = {Eigen::Vector3d(0, 1, -220), Eigen::Vector3d(0, -1, 260)};  // shaft between v = 220 and 260
+  ApparentContour const c = horizontalShaft();
   cv::Mat speckled = img.clone();
   cv::RNG rng(3);
   for (int y = 220; y <= 260; ++y)
@@ -256,10 +264,7 @@ TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
 // the same strip on pale tissue all along both sides is still refused.
 TEST(StripSearch, FullResolutionContrastAllowsABlobAlongPartOfASide) {
   cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
-  ApparentContour c;
-  c.entry_px = {0, 240};
-  c.tip_px = {400, 240};
-  c.lines = {Eigen::Vector3d(0, 1, -220), Eigen::Vector3d(0, -1, 260)};  // shaft between v = 220 and 260
+  ApparentContour const c = horizontalShaft();
   img(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
   cv::Mat gauze = img.clone();
   gauze(cv::Rect(0, 160, 240, 60)).setTo(cv::Scalar(150, 150, 152));  // above the shaft, 60 % of its length
