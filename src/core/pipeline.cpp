@@ -95,6 +95,12 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
     out.instruments.push_back(o);
   }
   out.insertion_points = reportInsertionPoints(points_, K_);
+  // Each shaft attached to a located insertion point: its axis through that point.
+  for (InstrumentObservation& o : out.instruments)
+    for (InsertionPointReport const& ip : out.insertion_points)
+      if (ip.id == o.insertion_point && ip.located && ip.estimate.ok())
+        o.constrained = constrainAxisToPoint(o.pose, ip.estimate.position, ip.estimate.covariance,
+                                             params_.insertion_points.tracker.point_motion_sigma);
   out.latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -25,6 +25,7 @@
 #include <utility>
 #include <vector>
 
+#include "endo_guidance/core/constrained_axis.h"
 #include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
@@ -92,6 +93,9 @@ struct Result {
   std::vector<int> first_located;
   double located_error_mm = 0.0;  // the largest distance of any located point to its nearest true trocar, all frames
   std::vector<std::array<double, 3>> by_length;  // visible length (px), direction (deg), distance (relative) per found shaft
+  // Found shafts the pipeline attached to a located insertion point: direction (deg) and distance
+  // (relative) of the axis through that point (constrained_axis.h), and of the same axes alone.
+  std::vector<double> dir_through, dist_through, dir_alone, dist_alone;
 };
 
 double msSince(std::chrono::steady_clock::time_point t0) {
@@ -174,6 +178,22 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
         R.dist_signed.push_back((pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
         R.dist_rel.push_back(std::abs(R.dist_signed.back()));
         R.by_length.push_back({(v.truth.tip_px - v.truth.entry_px).norm(), R.dir_deg.back(), R.dist_rel.back()});
+        // The same axis through the located insertion point the pipeline attached it to.
+        for (auto const& o : out.instruments) {
+          if (o.contour.lines != c.lines) continue;
+          for (auto const& ip : out.insertion_points) {
+            if (ip.id != o.insertion_point || !ip.located || !ip.estimate.ok()) continue;
+            auto const f = constrainAxisToPoint(pose.pose, ip.estimate.position, ip.estimate.covariance,
+                                                pp.insertion_points.tracker.point_motion_sigma);
+            if (!f) continue;
+            R.dir_through.push_back(std::atan2(f->pose.axis.direction().cross(v.axis.direction()).norm(),
+                                               f->pose.axis.direction().dot(v.axis.direction())) * 180.0 / M_PI);
+            R.dist_through.push_back(std::abs(f->pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
+            R.dir_alone.push_back(R.dir_deg.back());
+            R.dist_alone.push_back(R.dist_rel.back());
+          }
+          break;
+        }
         if (baseline) baseline_axes[static_cast<std::size_t>(v.instrument)].push_back(pose.pose.axis);
       }
     }
@@ -372,6 +392,12 @@ int main(int argc, char** argv) {
     if (baseline)
       std::printf("  %s baseline cost: %.1fx cv::cvtColor(BGR->HSV) of the frame (median over frames, same run)\n", s.name.c_str(),
                   percentile(r.hsv_ratio, 0.5));
+    if (!r.dir_through.empty())
+      std::printf("  %s: through the insertion point (%zu shafts attached to a located one): direction p50 %.3f° p95 %.3f°, distance p50 %.3f %%"
+                  " (the same axes alone: %.3f° / %.3f°, %.3f %%)\n",
+                  s.name.c_str(), r.dir_through.size(), percentile(r.dir_through, 0.5), percentile(r.dir_through, 0.95),
+                  100 * percentile(r.dist_through, 0.5), percentile(r.dir_alone, 0.5), percentile(r.dir_alone, 0.95),
+                  100 * percentile(r.dist_alone, 0.5));
     if (verbose) {
       std::printf("  %s: %d of %d visible shafts found, %d of %d with a line cut off; %d false in %d frames\n", s.name.c_str(), r.found,
                   r.visible, r.cut_found, r.cut, r.false_shafts, r.frames);

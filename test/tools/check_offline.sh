@@ -56,13 +56,33 @@ for r in good:
         assert abs(math.hypot(*i["direction"]) - 1) < 1e-6
         for l in i["contours"]:
             assert abs(math.hypot(l[0], l[1]) - 1) < 1e-6
+# The axis through its insertion point: for a shaft attached to a located one (null otherwise),
+# a unit direction within a few degrees of the measured one, passing within mm of the point.
+through = 0
+for r in good:
+    located = {p["id"]: p for p in r["insertion_points"] if p["located"]}
+    for i in r["instruments"]:
+        t = i["through_insertion_point"]
+        if i["insertion_point"] not in located:
+            assert t is None, i
+            continue
+        assert t is not None, i
+        through += 1
+        d, m, P = t["direction"], t["moment"], located[i["insertion_point"]]["position"]
+        assert abs(math.hypot(*d) - 1) < 1e-6 and abs(sum(a * b for a, b in zip(d, m))) < 1e-9, t
+        cos = sum(a * b for a, b in zip(d, i["direction"]))
+        assert cos > math.cos(math.radians(3)), (t, i["direction"])
+        Pxd = [P[1] * d[2] - P[2] * d[1], P[2] * d[0] - P[0] * d[2], P[0] * d[1] - P[1] * d[0]]
+        assert math.dist(Pxd, m) < 0.003, (t, P)  # |P x d - m|: the point's distance to the axis
+        assert t["chi2"] >= 0, t
+assert through > 100, through
 assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
 for p in rows[-1]["insertion_points"]:
     C = p["covariance"]  # row-major 3x3, m^2: symmetric, positive diagonal, a sigma of mm here
     assert len(C) == 9 and all(abs(C[3 * a + b] - C[3 * b + a]) <= 1e-9 * abs(C[0]) for a in range(3) for b in range(3)), C
     assert all(C[4 * a] > 0 for a in range(3)), C
     assert 1e-5 < math.sqrt(C[0] + C[4] + C[8]) < 0.02, C
-print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts")
+print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts,", through, "through a located insertion point")
 PY
 test "$(ls "$T/ov" | wc -l)" -eq 118
 # A bag (sensor_msgs/Image + camera_info beside it, stamps since the epoch): its camera_info is

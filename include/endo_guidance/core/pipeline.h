@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "endo_guidance/core/constrained_axis.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/segmentation.h"
@@ -33,6 +34,10 @@ struct InstrumentObservation {
   std::optional<Eigen::Vector3d> tip_c; ///< the tip pixel back-projected onto the axis
   int insertion_point = -1;
   int track = -1;
+  /// The axis through its insertion point (constrained_axis.h): set when the shaft is attached
+  /// to a located insertion point (InsertionPointReport::located), with the trocar's motion
+  /// `insertion_points.tracker.point_motion_sigma`. `pose` stays the contour's own measurement.
+  std::optional<ConstrainedAxis> constrained;
 };
 
 struct InsertionPointReport {
