@@ -147,6 +147,7 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
   InstrumentAxisArray::Ptr instruments(new InstrumentAxisArray);
   instruments->header = msg->header;
   std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
+  std::vector<core::CylinderPose> poses;  // per reported instrument: its measured axis
   for (auto const& a : msg->axes) {
     auto const parsed = ros_io::fromMsg(a);
     if (!parsed) {
@@ -159,12 +160,21 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     if (!keep) continue;
     InstrumentAxis out = a;
     out.insertion_point_id = id;
+    out.through_valid = false;  // (set below once this frame's reports are known)
     instruments->axes.push_back(out);
+    poses.push_back(pose);
     if (id >= 0)
       attached[id].push_back(a.tip_valid ? Eigen::Vector3d(a.tip.x, a.tip.y, a.tip.z)
                                          : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
   }
   last_reports_ = core::reportInsertionPoints(*set_, K);
+  // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
+  for (std::size_t i = 0; i < instruments->axes.size(); ++i)
+    for (auto const& r : last_reports_)
+      if (r.id == instruments->axes[i].insertion_point_id && r.located && r.estimate.ok())
+        if (auto const f = core::constrainAxisToPoint(poses[i], r.estimate.position, r.estimate.covariance,
+                                                      params_.insertion_points.tracker.point_motion_sigma))
+          ros_io::setThrough(f->pose, instruments->axes[i]);
   InsertionPointArray::Ptr points(new InsertionPointArray);
   points->header = msg->header;
   std::vector<geometry_msgs::TransformStamped> tfs;

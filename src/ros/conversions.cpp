@@ -150,6 +150,21 @@ bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, st
   return true;
 }
 
+bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m) {
+  Eigen::Vector3d const& d = through.axis.direction();
+  Eigen::Vector3d const& mo = through.axis.moment();
+  m.through_valid = d.allFinite() && mo.allFinite() && through.covariance.allFinite();
+  if (!m.through_valid) return false;
+  m.axis_through.direction.x = d.x();
+  m.axis_through.direction.y = d.y();
+  m.axis_through.direction.z = d.z();
+  m.axis_through.moment.x = mo.x();
+  m.axis_through.moment.y = mo.y();
+  m.axis_through.moment.z = mo.z();
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m.covariance_through.data()) = through.covariance;
+  return true;
+}
+
 std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) {
   Eigen::Vector3d const d(m.axis.direction.x, m.axis.direction.y, m.axis.direction.z);
   Eigen::Vector3d const mo(m.axis.moment.x, m.axis.moment.y, m.axis.moment.z);

@@ -39,6 +39,9 @@ bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, st
            endo_guidance::InstrumentAxis& m);
 /// nullopt unless the direction is unit, the moment orthogonal to it and both finite.
 std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m);
+/// Fills the axis through the insertion point (through_valid, axis_through, covariance_through):
+/// false (and through_valid false) when it is not finite.
+bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m);
 bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m);
 
 /// Reads the pipeline parameters (keys of config/pipeline.yaml) from `nh`'s namespace over the
