@@ -126,19 +126,26 @@ core::ApparentContour fromMsg(endo_guidance::ApparentContour const& m) {
   return c;
 }
 
-bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
-           endo_guidance::InstrumentAxis& m) {
+namespace {
+// A finite axis and its covariance into a PluckerLine message and a row-major 6x6 array.
+bool axisToMsg(core::CylinderPose const& pose, endo_guidance::PluckerLine& line, boost::array<double, 36>& covariance) {
   Eigen::Vector3d const& d = pose.axis.direction();
   Eigen::Vector3d const& mo = pose.axis.moment();
-  if (!d.allFinite() || !mo.allFinite() || !pose.covariance.allFinite() || !std::isfinite(radius) || !std::isfinite(residual_px))
-    return false;
-  m.axis.direction.x = d.x();
-  m.axis.direction.y = d.y();
-  m.axis.direction.z = d.z();
-  m.axis.moment.x = mo.x();
-  m.axis.moment.y = mo.y();
-  m.axis.moment.z = mo.z();
-  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m.covariance.data()) = pose.covariance;
+  if (!d.allFinite() || !mo.allFinite() || !pose.covariance.allFinite()) return false;
+  line.direction.x = d.x();
+  line.direction.y = d.y();
+  line.direction.z = d.z();
+  line.moment.x = mo.x();
+  line.moment.y = mo.y();
+  line.moment.z = mo.z();
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(covariance.data()) = pose.covariance;
+  return true;
+}
+}  // namespace
+
+bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
+           endo_guidance::InstrumentAxis& m) {
+  if (!std::isfinite(radius) || !std::isfinite(residual_px) || !axisToMsg(pose, m.axis, m.covariance)) return false;
   m.radius = radius;
   m.residual_px = residual_px;
   m.tip_valid = tip && tip->allFinite();
@@ -151,18 +158,14 @@ bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, st
 }
 
 bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m) {
-  Eigen::Vector3d const& d = through.axis.direction();
-  Eigen::Vector3d const& mo = through.axis.moment();
-  m.through_valid = d.allFinite() && mo.allFinite() && through.covariance.allFinite();
-  if (!m.through_valid) return false;
-  m.axis_through.direction.x = d.x();
-  m.axis_through.direction.y = d.y();
-  m.axis_through.direction.z = d.z();
-  m.axis_through.moment.x = mo.x();
-  m.axis_through.moment.y = mo.y();
-  m.axis_through.moment.z = mo.z();
-  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m.covariance_through.data()) = through.covariance;
-  return true;
+  endo_guidance::PluckerLine line;
+  boost::array<double, 36> covariance{};
+  m.through_valid = axisToMsg(through, line, covariance);
+  if (m.through_valid) {
+    m.axis_through = line;
+    m.covariance_through = covariance;
+  }
+  return m.through_valid;
 }
 
 std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) {
