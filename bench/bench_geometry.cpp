@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "endo_guidance/core/constrained_axis.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/insertion_point_tracker.h"
@@ -68,6 +69,26 @@ void BM_CylinderPose(benchmark::State& st) {
   }
 }
 BENCHMARK(BM_CylinderPose)->Arg(0)->Arg(1)->ArgName("covariance");
+
+// The measured axis fused with its (true, 1 mm uncertain) trocar: per attached shaft and frame
+// once the trocar is located.
+void BM_ConstrainedAxis(benchmark::State& st) {
+  auto const& v = views();
+  Eigen::Matrix3d const K = SyntheticSceneOptions{}.K;
+  std::vector<std::pair<CylinderPose, Eigen::Vector3d>> in;
+  for (std::size_t i = 0; i < 500 && i < v.size(); ++i) {
+    auto const r = estimateCylinderPose(K, v[i].radius, v[i].measured);
+    if (r.ok()) in.emplace_back(r.pose, v[i].trocar_c);
+  }
+  Eigen::Matrix3d const S = 1e-6 * Eigen::Matrix3d::Identity();
+  std::size_t i = 0;
+  for (auto _ : st) {
+    auto const& [pose, trocar] = in[i++ % in.size()];
+    auto f = constrainAxisToPoint(pose, trocar, S, 0.001);
+    benchmark::DoNotOptimize(f);
+  }
+}
+BENCHMARK(BM_ConstrainedAxis);
 
 void BM_CylinderPoseConic(benchmark::State& st) {
   auto const& v = views();
