@@ -250,7 +250,12 @@ std::optional<std::array<ImageLine, 2>> projectCylinder(Eigen::Matrix3d const& K
 
 std::optional<Eigen::Vector3d> backProjectOntoAxis(Eigen::Matrix3d const& K, PluckerLine const& axis,
                                                    Eigen::Vector2d const& px) {
-  Eigen::Vector3d const r = K.partialPivLu().solve(Eigen::Vector3d(px.x(), px.y(), 1.0)).normalized();
+  return backProjectOntoAxis(axis, K.partialPivLu().solve(Eigen::Vector3d(px.x(), px.y(), 1.0)));
+}
+
+std::optional<Eigen::Vector3d> backProjectOntoAxis(PluckerLine const& axis, Eigen::Vector3d const& ray) {
+  if (!ray.allFinite() || !(ray.norm() > 0.0)) return std::nullopt;
+  Eigen::Vector3d const r = ray.normalized();
   Eigen::Vector3d const& d = axis.direction();
   Eigen::Vector3d const p0 = axis.closestPointToOrigin();
   // Minimise |p0 + t d - s r|: normal equations of the two line parameters.

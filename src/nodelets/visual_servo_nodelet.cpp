@@ -66,6 +66,7 @@ class VisualServoNodelet : public nodelet::Nodelet {
   int arm_index_ = 0, insertion_point_id_ = -1;
   std::string arm_, robot_base_, robot_trocar_frame_, robot_instrument_frame_, trocar_prefix_;
   double stale_timeout_ = 0.1, max_jump_ = 0.01, joint_timeout_ = 0.2, period_ = 0.04;
+  bool use_axis_through_ = true;  // the shaft's axis through its trocar when given (InstrumentAxis.axis_through)
   ServoTarget::ConstPtr pending_target_;  // resolved against the next measurement
   double roll_rate_ = 0.0;
   sensor_msgs::JointState::ConstPtr joints_;
@@ -91,6 +92,7 @@ void VisualServoNodelet::onInit() {
   pnh_.param("estimate_rotation", estimate_rotation_, true);
   pnh_.param("stale_timeout", stale_timeout_, 0.1);
   pnh_.param("max_jump", max_jump_, 0.01);
+  pnh_.param("use_axis_through", use_axis_through_, true);
   pnh_.param("joint_timeout", joint_timeout_, 0.2);
   pnh_.param("control_period", period_, 0.04);
   std::vector<double> rpy{0, 0, 0};
@@ -243,7 +245,19 @@ void VisualServoNodelet::instrumentsCb(InstrumentAxisArray::ConstPtr const& msg)
   for (auto const& x : msg->axes)
     if (x.insertion_point_id == insertion_point_id_ && x.tip_valid) a = &x;
   if (!a) return last_tip_.reset(), stop("instrument lost (no shaft through trocar " + std::to_string(insertion_point_id_) + ")", msg->header);
-  Eigen::Vector3d const tip(a->tip.x, a->tip.y, a->tip.z), d(a->axis.direction.x, a->axis.direction.y, a->axis.direction.z);
+  Eigen::Vector3d tip(a->tip.x, a->tip.y, a->tip.z), d(a->axis.direction.x, a->axis.direction.y, a->axis.direction.z);
+  // The axis through the trocar (fused with it: a short shaft's direction is fixed by its
+  // trocar), and the tip on it: the point of that axis nearest the tip's viewing ray.
+  if (use_axis_through_ && a->through_valid) {
+    auto const through = core::PluckerLine::fromDirectionMoment(
+        Eigen::Vector3d(a->axis_through.direction.x, a->axis_through.direction.y, a->axis_through.direction.z),
+        Eigen::Vector3d(a->axis_through.moment.x, a->axis_through.moment.y, a->axis_through.moment.z));
+    if (through)
+      if (auto const t = core::backProjectOntoAxis(*through, tip)) {
+        tip = *t;
+        d = through->direction();
+      }
+  }
   if (last_tip_ && (tip - *last_tip_).norm() > max_jump_) {
     std::string const why = "tip jumped " + std::to_string((tip - *last_tip_).norm() * 1e3) + " mm between frames";
     last_tip_ = tip;

@@ -121,6 +121,14 @@ TEST(CylinderPose, TipBackProjection) {
     auto const tip = backProjectOntoAxis(scene.options().K, v.axis, v.truth.tip_px);
     ASSERT_TRUE(tip);
     EXPECT_LT((*tip - v.tip_c).norm(), 1e-9);
+    // The same from the viewing ray alone (any point on it, here 3x the tip): the servo's use.
+    auto const again = backProjectOntoAxis(v.axis, 3.0 * v.tip_c);
+    ASSERT_TRUE(again);
+    EXPECT_LT((*again - v.tip_c).norm(), 1e-9);
+    // A ray along the axis meets it nowhere in particular; no ray at all is refused.
+    EXPECT_FALSE(backProjectOntoAxis(v.axis, v.axis.direction()));
+    EXPECT_FALSE(backProjectOntoAxis(v.axis, Eigen::Vector3d::Zero()));
+    EXPECT_FALSE(backProjectOntoAxis(v.axis, Eigen::Vector3d(std::nan(""), 0.0, 1.0)));
   }
 }
 

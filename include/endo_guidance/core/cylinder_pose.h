@@ -98,5 +98,8 @@ std::optional<std::array<ImageLine, 2>> projectCylinder(Eigen::Matrix3d const& K
 /// nullopt if the ray is parallel to the axis.
 std::optional<Eigen::Vector3d> backProjectOntoAxis(Eigen::Matrix3d const& K, PluckerLine const& axis,
                                                    Eigen::Vector2d const& px);
+/// The same for a viewing ray given by its direction from the optical centre (any length; e.g.
+/// a point known on that ray: a tip found on another estimate of the axis).
+std::optional<Eigen::Vector3d> backProjectOntoAxis(PluckerLine const& axis, Eigen::Vector3d const& ray);
 
 }  // namespace endo_guidance::core
