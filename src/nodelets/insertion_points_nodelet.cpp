@@ -160,7 +160,9 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     if (!keep) continue;
     InstrumentAxis out = a;
     out.insertion_point_id = id;
-    out.through_valid = false;  // (set below once this frame's reports are known)
+    out.through_valid = false;  // (set below once this frame's reports are known; zero until then)
+    out.axis_through = PluckerLine();
+    out.covariance_through.fill(0.0);
     instruments->axes.push_back(out);
     poses.push_back(pose);
     if (id >= 0)
