@@ -46,6 +46,14 @@ std::vector<InsertionPointReport> reportInsertionPoints(InsertionPointSet const&
   return out;
 }
 
+std::optional<ConstrainedAxis> axisThroughInsertionPoint(CylinderPose const& pose, int insertion_point,
+                                                         std::vector<InsertionPointReport> const& reports, double point_motion_sigma) {
+  for (InsertionPointReport const& r : reports)
+    if (r.id == insertion_point && r.located && r.estimate.ok())
+      return constrainAxisToPoint(pose, r.estimate.position, r.estimate.covariance, point_motion_sigma);
+  return std::nullopt;
+}
+
 int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep) {
   int const id = set.update(pose.axis, pose.covariance);  // Eq. (6) + tracking
   *keep = !(reject_unattached && established && id < 0);
@@ -97,10 +105,8 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   out.insertion_points = reportInsertionPoints(points_, K_);
   // Each shaft attached to a located insertion point: its axis through that point.
   for (InstrumentObservation& o : out.instruments)
-    for (InsertionPointReport const& ip : out.insertion_points)
-      if (ip.id == o.insertion_point && ip.located && ip.estimate.ok())
-        o.constrained = constrainAxisToPoint(o.pose, ip.estimate.position, ip.estimate.covariance,
-                                             params_.insertion_points.tracker.point_motion_sigma);
+    o.constrained = axisThroughInsertionPoint(o.pose, o.insertion_point, out.insertion_points,
+                                              params_.insertion_points.tracker.point_motion_sigma);
   out.latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -172,11 +172,9 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
   last_reports_ = core::reportInsertionPoints(*set_, K);
   // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
   for (std::size_t i = 0; i < instruments->axes.size(); ++i)
-    for (auto const& r : last_reports_)
-      if (r.id == instruments->axes[i].insertion_point_id && r.located && r.estimate.ok())
-        if (auto const f = core::constrainAxisToPoint(poses[i], r.estimate.position, r.estimate.covariance,
-                                                      params_.insertion_points.tracker.point_motion_sigma))
-          ros_io::setThrough(f->pose, instruments->axes[i]);
+    if (auto const f = core::axisThroughInsertionPoint(poses[i], instruments->axes[i].insertion_point_id, last_reports_,
+                                                       params_.insertion_points.tracker.point_motion_sigma))
+      ros_io::setThrough(f->pose, instruments->axes[i]);
   InsertionPointArray::Ptr points(new InsertionPointArray);
   points->header = msg->header;
   std::vector<geometry_msgs::TransformStamped> tfs;

@@ -25,7 +25,6 @@
 #include <utility>
 #include <vector>
 
-#include "endo_guidance/core/constrained_axis.h"
 #include "endo_guidance/core/insertion_point.h"
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
@@ -181,11 +180,8 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
         // The same axis through the located insertion point the pipeline attached it to.
         for (auto const& o : out.instruments) {
           if (o.contour.lines != c.lines) continue;
-          for (auto const& ip : out.insertion_points) {
-            if (ip.id != o.insertion_point || !ip.located || !ip.estimate.ok()) continue;
-            auto const f = constrainAxisToPoint(pose.pose, ip.estimate.position, ip.estimate.covariance,
-                                                pp.insertion_points.tracker.point_motion_sigma);
-            if (!f) continue;
+          if (auto const f = axisThroughInsertionPoint(pose.pose, o.insertion_point, out.insertion_points,
+                                                       pp.insertion_points.tracker.point_motion_sigma)) {
             R.dir_through.push_back(std::atan2(f->pose.axis.direction().cross(v.axis.direction()).norm(),
                                                f->pose.axis.direction().dot(v.axis.direction())) * 180.0 / M_PI);
             R.dist_through.push_back(std::abs(f->pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());

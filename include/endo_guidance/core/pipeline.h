@@ -67,6 +67,10 @@ void wellConditionedImages(InsertionPointSet const& set, Eigen::Matrix3d const& 
                            std::vector<int>* ids = nullptr);
 /// Every insertion point with an estimate, with its image through K.
 std::vector<InsertionPointReport> reportInsertionPoints(InsertionPointSet const& set, Eigen::Matrix3d const& K);
+/// The axis through its insertion point (constrainAxisToPoint()) of a shaft attached to
+/// `insertion_point`, when that point is located in `reports`; nullopt otherwise.
+std::optional<ConstrainedAxis> axisThroughInsertionPoint(CylinderPose const& pose, int insertion_point,
+                                                         std::vector<InsertionPointReport> const& reports, double point_motion_sigma);
 /// The attachment stage ([Doignon07] Eq. (6) + tracking): feeds the axis to the set and returns
 /// the id of its insertion point (-1: none); *keep is false when the shaft must not be reported
 /// (reject_unattached, an established point and no attachment).
