@@ -94,6 +94,11 @@ class Graph : public ::testing::Test {
     ASSERT_GT(compressed_ ? compressed_pub_.getNumSubscribers() : image_pub_.getNumSubscribers(), 0u)
         << "the Segmentation nodelet did not subscribe to the camera";
   }
+  /// Shuts the subscriptions down before the members their callbacks write are destroyed
+  /// (shutdown() waits for a callback already running).
+  void TearDown() override {
+    for (auto& s : subs_) s.shutdown();
+  }
   bool points_sub_ready() { return subs_[2].getNumPublishers() > 0 && subs_[0].getNumPublishers() > 0; }
   void diagCb(diagnostic_msgs::DiagnosticArray::ConstPtr const& d) {
     std::lock_guard<std::mutex> l(diag_mutex_);
@@ -166,13 +171,16 @@ class Graph : public ::testing::Test {
   core::SyntheticSceneOptions so_;
   ros::Publisher image_pub_, info_pub_, compressed_pub_;
   bool compressed_ = false;
-  std::vector<ros::Subscriber> subs_;
   Latest<ApparentContourArray> contours_;
   Latest<InstrumentAxisArray> axes_;
   Latest<InsertionPointArray> points_;
   Latest<InstrumentAxisArray> instruments_;
   std::mutex diag_mutex_;
   std::string diag_text_;
+  // Last, so destroyed first: the spinner threads keep delivering (diagnostics, late results)
+  // until the subscriptions are shut down, and a callback must never write into a destroyed
+  // member (it aborted the test with "double free or corruption" at the end of a test).
+  std::vector<ros::Subscriber> subs_;
 };
 
 using core::SceneRenderer;
