@@ -313,6 +313,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> only;
   std::vector<int> overlay_frames;  // --overlay-frame K (repeatable): eval_SCENE_K.png
   std::string params_path;
+  int hard_jpeg = -1;         // --hard-jpeg Q: the hard scene's JPEG quality (0: no JPEG), else its default (80)
+  double hard_noise = -1.0;   // --hard-noise SIGMA: its additive noise (grey levels), else its default (4)
   // Regression bounds per scene (SCENE=VALUE, repeatable): exit 1 when one is violated.
   struct Bound {
     std::string scene;
@@ -335,6 +337,8 @@ int main(int argc, char** argv) {
     else if (a == "--baseline") baseline = true;
     else if (a == "--scene" && i + 1 < argc) only.push_back(argv[++i]);
     else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
+    else if (a == "--hard-jpeg" && i + 1 < argc) hard_jpeg = std::atoi(argv[++i]);
+    else if (a == "--hard-noise" && i + 1 < argc) hard_noise = std::atof(argv[++i]);
     else if (a == "--min-found" && i + 1 < argc && bound(argv[i + 1], min_found)) ++i;
     else if (a == "--max-false" && i + 1 < argc && bound(argv[i + 1], max_false)) ++i;
     else if (a == "--max-line-p95" && i + 1 < argc && bound(argv[i + 1], max_line_p95)) ++i;
@@ -346,6 +350,7 @@ int main(int argc, char** argv) {
                    "       [--overlay-frame K]...   (also write frame K's overlay, eval_SCENE_K.png; with --verbose its regions)\n"
                    "       [--baseline]   (the issue's Canny + Hough baseline instead of the pipeline)\n"
                    "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n"
+                   "       [--hard-jpeg Q] [--hard-noise SIGMA]   (the hard scene's JPEG quality, 0 = none, and noise; defaults 80 and 4)\n"
                    "       [--min-found SCENE=PCT] [--max-false SCENE=PER_FRAME] [--max-line-p95 SCENE=PX] [--max-trocar SCENE=MM]\n"
                    "       [--max-located-error SCENE=MM]   (any located point -- on tf for the servo -- to its nearest true trocar, any frame)\n"
                    "       (regression bounds, repeatable; exit 1 if one is violated)\n");
@@ -365,7 +370,14 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  RenderOptions const clean, hard = hardRenderOptions();
+  RenderOptions const clean;
+  RenderOptions hard = hardRenderOptions();
+  if (hard_jpeg >= 0) hard.jpeg_quality = hard_jpeg;
+  if (hard_noise >= 0.0) hard.noise_sigma = hard_noise;
+  if (hard.jpeg_quality > 100 || !std::isfinite(hard.noise_sigma)) {
+    std::fprintf(stderr, "endo_guidance_eval_synthetic: --hard-jpeg must be 0..100 and --hard-noise finite\n");
+    return 2;
+  }
   RenderOptions bc = clean;
   bc.black_shafts = true;
   bc.circular_fov = true;
