@@ -170,17 +170,21 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
                                          : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
   }
   last_reports_ = core::reportInsertionPoints(*set_, K);
-  // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
-  for (std::size_t i = 0; i < instruments->axes.size(); ++i)
-    if (auto const f = core::axisThroughInsertionPoint(poses[i], instruments->axes[i].insertion_point_id, last_reports_,
-                                                       params_.insertion_points.tracker.point_motion_sigma))
-      ros_io::setThrough(f->pose, instruments->axes[i]);
-  InsertionPointArray::Ptr points(new InsertionPointArray);
-  points->header = msg->header;
-  std::vector<geometry_msgs::TransformStamped> tfs;
   bool const markers = markers_pub_.getNumSubscribers() > 0;
   visualization_msgs::MarkerArray::Ptr mk(new visualization_msgs::MarkerArray);
   if (markers) mk->markers.push_back(ros_io::deleteAll(msg->header));
+  // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
+  for (std::size_t i = 0; i < instruments->axes.size(); ++i) {
+    InstrumentAxis& m = instruments->axes[i];
+    auto const f = core::axisThroughInsertionPoint(poses[i], m.insertion_point_id, last_reports_,
+                                                   params_.insertion_points.tracker.point_motion_sigma);
+    if (f && ros_io::setThrough(f->pose, m) && markers)
+      ros_io::appendThroughMarker(mk->markers, msg->header, static_cast<int>(i), *f,
+                                  m.tip_valid ? std::optional<Eigen::Vector3d>(Eigen::Vector3d(m.tip.x, m.tip.y, m.tip.z)) : std::nullopt);
+  }
+  InsertionPointArray::Ptr points(new InsertionPointArray);
+  points->header = msg->header;
+  std::vector<geometry_msgs::TransformStamped> tfs;
   for (auto const& r : last_reports_) {
     InsertionPoint p;
     if (!ros_io::toMsg(r, p)) continue;

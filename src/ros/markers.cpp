@@ -120,4 +120,17 @@ void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs:
   }
 }
 
+void appendThroughMarker(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header, int index,
+                         core::ConstrainedAxis const& through, std::optional<Eigen::Vector3d> const& tip) {
+  Eigen::Vector3d const d = through.pose.axis.direction();
+  Eigen::Vector3d const p0 = d.cross(through.pose.axis.moment());  // axis point closest to the optical centre
+  Eigen::Vector3d const a = p0 + d.dot(through.pivot - p0) * d;     // the pivot's foot (the pivot, up to the fit)
+  Eigen::Vector3d const b = tip ? Eigen::Vector3d(p0 + d.dot(*tip - p0) * d) : p0;
+  if (!a.allFinite() || !b.allFinite()) return;
+  auto line = base(header, "axes_through", index, visualization_msgs::Marker::LINE_LIST, 0.1f, 0.9f, 1.0f, 1.0f);
+  line.scale.x = 0.0008;
+  line.points = {pt(a), pt(b)};
+  out.push_back(line);
+}
+
 }  // namespace endo_guidance::ros_io

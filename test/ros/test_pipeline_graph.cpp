@@ -13,6 +13,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_ros/transform_listener.h>
+#include <visualization_msgs/MarkerArray.h>
 
 #include <algorithm>
 #include <cmath>
@@ -86,6 +87,7 @@ class Graph : public ::testing::Test {
     subs_.push_back(nh_.subscribe("endoscope/insertion_points", 50, &Latest<InsertionPointArray>::cb, &points_));
     subs_.push_back(nh_.subscribe("/diagnostics", 50, &Graph::diagCb, this));
     subs_.push_back(nh_.subscribe("endoscope/instruments", 50, &Latest<InstrumentAxisArray>::cb, &instruments_));
+    subs_.push_back(nh_.subscribe("endoscope/trocar_markers", 50, &Latest<visualization_msgs::MarkerArray>::cb, &trocar_markers_));
     for (int i = 0; i < 100 && ((!compressed_ && image_pub_.getNumSubscribers() == 0) || info_pub_.getNumSubscribers() == 0 ||
                                 points_sub_ready() == false);
          ++i)
@@ -175,6 +177,7 @@ class Graph : public ::testing::Test {
   Latest<InstrumentAxisArray> axes_;
   Latest<InsertionPointArray> points_;
   Latest<InstrumentAxisArray> instruments_;
+  Latest<visualization_msgs::MarkerArray> trocar_markers_;
   std::mutex diag_mutex_;
   std::string diag_text_;
   // Last, so destroyed first: the spinner threads keep delivering (diagnostics, late results)
@@ -298,6 +301,34 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   // The segmentation's diagnostics: the last frame's shafts and the strip searches per frame.
   EXPECT_TRUE(diagnosticsSay("shafts (last frame)=" + std::to_string(last_shafts)));
   EXPECT_TRUE(diagnosticsSay("strip searches per frame="));
+  // rviz: the last frame's trocar markers draw one "axes_through" line per instrument given its
+  // axis through a located trocar, on that axis.
+  auto const inst = instruments_.get();
+  ASSERT_TRUE(inst);
+  visualization_msgs::MarkerArray::ConstPtr mk;
+  for (int i = 0; i < 100 && !(mk && mk->markers.size() > 0 && mk->markers[0].header.stamp == inst->header.stamp); ++i) {
+    mk = trocar_markers_.get();
+    ros::WallDuration(0.01).sleep();
+  }
+  ASSERT_TRUE(mk && !mk->markers.empty() && mk->markers[0].header.stamp == inst->header.stamp) << "no trocar markers for the last frame";
+  int through = 0, drawn = 0;
+  for (auto const& m : inst->axes) through += m.through_valid;
+  for (auto const& m : mk->markers) {
+    if (m.ns != "axes_through") continue;
+    ++drawn;
+    ASSERT_EQ(m.points.size(), 2u);
+    ASSERT_GE(m.id, 0);
+    ASSERT_LT(static_cast<std::size_t>(m.id), inst->axes.size());
+    auto const& a = inst->axes[static_cast<std::size_t>(m.id)];
+    ASSERT_TRUE(a.through_valid);
+    auto const line = core::PluckerLine::fromDirectionMoment(
+        Eigen::Vector3d(a.axis_through.direction.x, a.axis_through.direction.y, a.axis_through.direction.z),
+        Eigen::Vector3d(a.axis_through.moment.x, a.axis_through.moment.y, a.axis_through.moment.z));
+    ASSERT_TRUE(line);
+    for (auto const& q : m.points) EXPECT_LT(line->distanceTo(Eigen::Vector3d(q.x, q.y, q.z)), 1e-6);
+  }
+  EXPECT_GT(through, 0);
+  EXPECT_EQ(drawn, through);
 }
 
 TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {

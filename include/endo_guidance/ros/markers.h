@@ -10,6 +10,7 @@
 #include <optional>
 #include <vector>
 
+#include "endo_guidance/core/constrained_axis.h"
 #include "endo_guidance/core/cylinder_pose.h"
 #include "endo_guidance/core/pipeline.h"
 
@@ -25,6 +26,12 @@ void appendShaftMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::
 /// the tips of the shafts attached to it (the axes converging on it).
 void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header,
                          core::InsertionPointReport const& point, std::vector<Eigen::Vector3d> const& attached_points);
+/// Per shaft attached to a located insertion point: its axis through that point
+/// (constrained_axis.h) as a line from the fused pivot to the tip's foot on that axis (the foot of
+/// the optical centre when the tip is unknown), namespace "axes_through". Nothing is added when
+/// an end is not finite.
+void appendThroughMarker(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header, int index,
+                         core::ConstrainedAxis const& through, std::optional<Eigen::Vector3d> const& tip);
 visualization_msgs::Marker deleteAll(std_msgs::Header const& header);
 
 }  // namespace endo_guidance::ros_io

@@ -1,0 +1,73 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// The rviz markers (ros/markers.h) against exact geometry; no master needed.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "endo_guidance/ros/markers.h"
+
+using namespace endo_guidance;
+
+namespace {
+
+Eigen::Vector3d toEigen(geometry_msgs::Point const& p) { return Eigen::Vector3d(p.x, p.y, p.z); }
+
+std_msgs::Header header() {
+  std_msgs::Header h;
+  h.frame_id = "endoscope_optical_frame";
+  h.stamp = ros::Time(12.5);
+  return h;
+}
+
+core::ConstrainedAxis throughAxis(Eigen::Vector3d const& pivot, Eigen::Vector3d const& tip) {
+  core::ConstrainedAxis c;
+  c.pose.axis = *core::PluckerLine::through(pivot, tip);
+  c.pivot = pivot;
+  return c;
+}
+
+TEST(Markers, TheAxisThroughTheTrocarRunsFromThePivotToTheTip) {
+  Eigen::Vector3d const P(0.10, 0.02, 0.01), T(0.01, -0.005, 0.12);
+  std::vector<visualization_msgs::Marker> out;
+  ros_io::appendThroughMarker(out, header(), 3, throughAxis(P, T), T);
+  ASSERT_EQ(out.size(), 1u);
+  auto const& m = out[0];
+  EXPECT_EQ(m.ns, "axes_through");
+  EXPECT_EQ(m.id, 3);
+  EXPECT_EQ(m.type, visualization_msgs::Marker::LINE_LIST);
+  EXPECT_EQ(m.header.frame_id, "endoscope_optical_frame");
+  EXPECT_EQ(m.header.stamp, ros::Time(12.5));
+  ASSERT_EQ(m.points.size(), 2u);
+  EXPECT_LT((toEigen(m.points[0]) - P).norm(), 1e-12);
+  EXPECT_LT((toEigen(m.points[1]) - T).norm(), 1e-12);
+  EXPECT_GT(m.scale.x, 0.0);
+  EXPECT_GT(m.color.a, 0.0);
+}
+
+TEST(Markers, AnOffAxisTipIsDrawnAtItsFootAndNoTipAtTheOpticalCentresFoot) {
+  Eigen::Vector3d const P(-0.08, 0.03, 0.02), T(0.0, 0.0, 0.10);
+  core::ConstrainedAxis const c = throughAxis(P, T);
+  Eigen::Vector3d const d = c.pose.axis.direction();
+  Eigen::Vector3d const off = d.unitOrthogonal();  // a measured tip 2 mm beside the fused axis
+  std::vector<visualization_msgs::Marker> out;
+  ros_io::appendThroughMarker(out, header(), 0, c, Eigen::Vector3d(T + 0.002 * off));
+  ros_io::appendThroughMarker(out, header(), 1, c, std::nullopt);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_LT((toEigen(out[0].points[1]) - T).norm(), 1e-12);
+  Eigen::Vector3d const foot = toEigen(out[1].points[1]);
+  EXPECT_LT(std::abs(foot.dot(d)), 1e-12);              // the optical centre's foot: perpendicular to d
+  EXPECT_LT(c.pose.axis.distanceTo(foot), 1e-12);        // and on the axis
+}
+
+TEST(Markers, NothingIsDrawnForANonFiniteAxis) {
+  core::ConstrainedAxis c = throughAxis(Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d(0, 0, 0.1));
+  c.pivot = Eigen::Vector3d::Constant(NAN);
+  std::vector<visualization_msgs::Marker> out;
+  ros_io::appendThroughMarker(out, header(), 0, c, Eigen::Vector3d(0, 0, 0.1));
+  EXPECT_TRUE(out.empty());
+  c = throughAxis(Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d(0, 0, 0.1));
+  ros_io::appendThroughMarker(out, header(), 0, c, Eigen::Vector3d(NAN, 0, 0.1));
+  EXPECT_TRUE(out.empty());
+}
+
+}  // namespace
