@@ -248,16 +248,11 @@ void VisualServoNodelet::instrumentsCb(InstrumentAxisArray::ConstPtr const& msg)
   Eigen::Vector3d tip(a->tip.x, a->tip.y, a->tip.z), d(a->axis.direction.x, a->axis.direction.y, a->axis.direction.z);
   // The axis through the trocar (fused with it: a short shaft's direction is fixed by its
   // trocar), and the tip on it: the point of that axis nearest the tip's viewing ray.
-  if (use_axis_through_ && a->through_valid) {
-    auto const through = core::PluckerLine::fromDirectionMoment(
-        Eigen::Vector3d(a->axis_through.direction.x, a->axis_through.direction.y, a->axis_through.direction.z),
-        Eigen::Vector3d(a->axis_through.moment.x, a->axis_through.moment.y, a->axis_through.moment.z));
-    if (through)
-      if (auto const t = core::backProjectOntoAxis(*through, tip)) {
-        tip = *t;
-        d = through->direction();
-      }
-  }
+  if (auto const through = use_axis_through_ ? ros_io::throughFromMsg(*a) : std::nullopt)
+    if (auto const t = core::backProjectOntoAxis(through->axis, tip)) {
+      tip = *t;
+      d = through->axis.direction();
+    }
   if (last_tip_ && (tip - *last_tip_).norm() > max_jump_) {
     std::string const why = "tip jumped " + std::to_string((tip - *last_tip_).norm() * 1e3) + " mm between frames";
     last_tip_ = tip;

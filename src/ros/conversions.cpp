@@ -168,19 +168,29 @@ bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis
   return m.through_valid;
 }
 
-std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) {
-  Eigen::Vector3d const d(m.axis.direction.x, m.axis.direction.y, m.axis.direction.z);
-  Eigen::Vector3d const mo(m.axis.moment.x, m.axis.moment.y, m.axis.moment.z);
+namespace {
+// axisToMsg() back: nullopt unless the direction is unit, the moment orthogonal to it and both finite.
+std::optional<core::CylinderPose> axisFromMsg(endo_guidance::PluckerLine const& line, boost::array<double, 36> const& covariance) {
+  Eigen::Vector3d const d(line.direction.x, line.direction.y, line.direction.z);
+  Eigen::Vector3d const mo(line.moment.x, line.moment.y, line.moment.z);
   if (!d.allFinite() || !mo.allFinite() || std::abs(d.norm() - 1.0) > 1e-6 || std::abs(d.dot(mo)) > 1e-6 * (1.0 + mo.norm()))
     return std::nullopt;
   auto const axis = core::PluckerLine::fromDirectionMoment(d, mo);
   if (!axis) return std::nullopt;
   core::CylinderPose p;
   p.axis = *axis;
-  p.covariance = Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor> const>(m.covariance.data());
+  p.covariance = Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor> const>(covariance.data());
   p.distance = p.axis.moment().norm();
   if (!p.covariance.allFinite()) p.covariance.setZero();
   return p;
+}
+}  // namespace
+
+std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) { return axisFromMsg(m.axis, m.covariance); }
+
+std::optional<core::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m) {
+  if (!m.through_valid) return std::nullopt;
+  return axisFromMsg(m.axis_through, m.covariance_through);
 }
 
 bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m) {

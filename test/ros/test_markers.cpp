@@ -1,9 +1,11 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
-// The rviz markers (ros/markers.h) against exact geometry; no master needed.
+// The rviz markers (ros/markers.h) against exact geometry, and the axis-through conversions
+// (ros/conversions.h); no master needed.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
+#include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/markers.h"
 
 using namespace endo_guidance;
@@ -68,6 +70,19 @@ TEST(Markers, NothingIsDrawnForANonFiniteAxis) {
   c = throughAxis(Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d(0, 0, 0.1));
   ros_io::appendThroughMarker(out, header(), 0, c, Eigen::Vector3d(NAN, 0, 0.1));
   EXPECT_TRUE(out.empty());
+}
+
+TEST(Conversions, TheAxisThroughRoundTripsAndIsAbsentUnlessValid) {
+  core::ConstrainedAxis const c = throughAxis(Eigen::Vector3d(0.1, 0.02, 0.01), Eigen::Vector3d(0.01, -0.005, 0.12));
+  endo_guidance::InstrumentAxis m;
+  EXPECT_FALSE(ros_io::throughFromMsg(m));  // through_valid false
+  ASSERT_TRUE(ros_io::setThrough(c.pose, m));
+  auto const back = ros_io::throughFromMsg(m);
+  ASSERT_TRUE(back);
+  EXPECT_LT((back->axis.direction() - c.pose.axis.direction()).norm(), 1e-12);
+  EXPECT_LT((back->axis.moment() - c.pose.axis.moment()).norm(), 1e-12);
+  m.axis_through.direction.x += 0.1;  // not a unit direction: refused, not renormalised
+  EXPECT_FALSE(ros_io::throughFromMsg(m));
 }
 
 }  // namespace

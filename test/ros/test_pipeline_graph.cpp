@@ -27,6 +27,7 @@
 #include "endo_guidance/ResetInsertionPoint.h"
 #include "endo_guidance/core/scene_renderer.h"
 #include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/ros/conversions.h"
 #include "ros_test_main.h"
 
 using namespace endo_guidance;
@@ -321,11 +322,9 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
     ASSERT_LT(static_cast<std::size_t>(m.id), inst->axes.size());
     auto const& a = inst->axes[static_cast<std::size_t>(m.id)];
     ASSERT_TRUE(a.through_valid);
-    auto const line = core::PluckerLine::fromDirectionMoment(
-        Eigen::Vector3d(a.axis_through.direction.x, a.axis_through.direction.y, a.axis_through.direction.z),
-        Eigen::Vector3d(a.axis_through.moment.x, a.axis_through.moment.y, a.axis_through.moment.z));
-    ASSERT_TRUE(line);
-    for (auto const& q : m.points) EXPECT_LT(line->distanceTo(Eigen::Vector3d(q.x, q.y, q.z)), 1e-6);
+    auto const through = ros_io::throughFromMsg(a);
+    ASSERT_TRUE(through);
+    for (auto const& q : m.points) EXPECT_LT(through->axis.distanceTo(Eigen::Vector3d(q.x, q.y, q.z)), 1e-6);
   }
   EXPECT_GT(through, 0);
   EXPECT_EQ(drawn, through);

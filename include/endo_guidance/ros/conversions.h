@@ -42,6 +42,9 @@ std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m
 /// Fills the axis through the insertion point (through_valid, axis_through, covariance_through):
 /// false (and through_valid false) when it is not finite.
 bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m);
+/// setThrough() back: the axis through the insertion point, nullopt unless through_valid and
+/// valid as fromMsg() requires.
+std::optional<core::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m);
 bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m);
 
 /// Reads the pipeline parameters (keys of config/pipeline.yaml) from `nh`'s namespace over the
