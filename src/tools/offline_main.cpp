@@ -49,7 +49,7 @@ void usage(std::FILE* f) {
                "         images are rectified first and the contours are given in rectified pixels.\n"
                "  --output: one JSON object per frame (default: standard output).\n"
                "  --overlay: a directory (one PNG per frame) or a video file (.avi/.mp4/.mkv).\n"
-               "  --fps: time stamps of image files (default 25).\n"
+               "  --fps: time stamps of image files, and of a video without a frame rate (default 25).\n"
                "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n");
 }
 
@@ -92,14 +92,21 @@ class ImageFiles : public Source {
 
 class Video : public Source {
  public:
-  explicit Video(std::string const& path) : path_(path), cap_(path) {
+  // Frame k is stamped k / fps, the container's frame rate (`fallback_fps` when it has none).
+  // Not CAP_PROP_POS_MSEC: with the FFMPEG backend on H264 (the EndoVis robotic videos) it is
+  // the time of a frame two ahead after a read (0.08 s for frame 0 at 25 fps) and 0 after the
+  // last one, so the stamps went back to 0 at the end.
+  Video(std::string const& path, double fallback_fps) : path_(path), cap_(path) {
     if (!cap_.isOpened()) throw std::runtime_error("cannot open video '" + path + "'");
+    double const f = cap_.get(cv::CAP_PROP_FPS);
+    fps_ = std::isfinite(f) && f > 0.0 ? f : fallback_fps;
   }
   bool next(Frame& f) override {
     f = Frame{};
     if (!cap_.read(f.image)) return false;
-    f.source = path_ + "#" + std::to_string(k_++);
-    f.stamp = cap_.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+    f.source = path_ + "#" + std::to_string(k_);
+    f.stamp = static_cast<double>(k_) / fps_;
+    ++k_;
     return true;
   }
   long size() const override { return static_cast<long>(cap_.get(cv::CAP_PROP_FRAME_COUNT)); }
@@ -107,6 +114,7 @@ class Video : public Source {
  private:
   std::string path_;
   cv::VideoCapture cap_;
+  double fps_ = 25.0;
   long k_ = 0;
 };
 
@@ -322,7 +330,7 @@ int main(int argc, char** argv) {
         sources.push_back(std::make_unique<Bag>(in, topic));
       } else {
         flushImages();
-        sources.push_back(std::make_unique<Video>(in));
+        sources.push_back(std::make_unique<Video>(in, fps));
       }
     }
     flushImages();
