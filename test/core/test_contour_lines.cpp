@@ -654,6 +654,32 @@ TEST(ContourLines, SidesSoughtAgainAsTheStraightStretchesBeyondBlobsOnBothSides)
   }
 }
 
+// The straight-stretch searches (straightRun(): the points within 1 px of each sampled line,
+// counted four at a time with AVX2, or one at a time without it or with OpenCV's optimisations
+// off) give the same sides, bit for bit, in both paths: on the boundaries of the two merged
+// shafts above, with the stretches already taken out of the sequence (straightStretches()) and
+// without (parallelSide()).
+TEST(ContourLines, StraightStretchSearchIsTheSameInEveryPath) {
+  for (bool both : {false, true}) {
+    auto const m = mergedShaft(both, both);
+    ASSERT_TRUE(m.region);
+    ContourLinesParams const p;
+    for (SideSearch s : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
+      cv::setUseOptimized(true);
+      SideFit const a = fitSides(*m.region, m.fov, 1, p, s);
+      cv::setUseOptimized(false);
+      SideFit const b = fitSides(*m.region, m.fov, 1, p, s);
+      cv::setUseOptimized(true);
+      ASSERT_EQ(a.rejection, b.rejection);
+      for (int k = 0; k < 2; ++k) {
+        EXPECT_EQ(a.lines[k], b.lines[k]) << k;
+        EXPECT_EQ(a.points[k], b.points[k]) << k;
+      }
+    }
+  }
+  cv::setUseOptimized(true);
+}
+
 TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {
   // Only the lower blob: the upper side is straight from the entry, the lower chain runs around
   // the blob to the bottom border and ends there; the shaft's lower side beyond the blob is on
