@@ -177,7 +177,8 @@ void BM_Stage_Segmentation(benchmark::State& st) {
 }
 
 // The strip search from every seed of a frame (full search, as on a seed's first frame; a tracked
-// shaft is searched only about its last sides), including the Sobel of the feature.
+// shaft is searched only about its last sides), including the Sobel of the feature and its
+// packing for the ray walks.
 void BM_Stage_StripSearch(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
   int const s = std::max(1, static_cast<int>(std::lround(f.images[0].cols / 320.0)));
@@ -189,7 +190,8 @@ void BM_Stage_StripSearch(benchmark::State& st) {
   std::vector<Seed> const seeds = findSeeds(filt, fov);
   for (auto _ : st) {
     cv::spatialGradient(filt, gx, gy, 3);
-    for (auto const& sd : seeds) benchmark::DoNotOptimize(searchStrip(filt, gx, gy, fov, sd, 45, s, {}, {}));
+    RayField const field = packRayField(gx, gy, fov);  // once per frame, as the segmentation does
+    for (auto const& sd : seeds) benchmark::DoNotOptimize(searchStrip(filt, field, fov, sd, 45, s, {}, {}));
   }
   st.counters["seeds"] = static_cast<double>(seeds.size());
 }
@@ -250,8 +252,16 @@ void BM_RealVideoPairedWithHSV(benchmark::State& st) {
     return;
   }
   Pipeline p(f.K, f.images[0].size());
-  pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(p.process(im)); });
+  double strips = 0.0, shafts = 0.0, calls = 0.0;
+  pairedWithHSV(st, f, [&](cv::Mat const& im) {
+    auto const out = p.process(im);
+    strips += out.segmentation.strip_searches;
+    shafts += static_cast<double>(out.instruments.size());
+    calls += 1.0;
+  });
   st.counters["frames"] = static_cast<double>(f.images.size());
+  st.counters["strip_searches"] = strips / std::max(1.0, calls);  // per frame
+  st.counters["shafts"] = shafts / std::max(1.0, calls);          // reported per frame
 }
 
 // The in-vivo stills, each on its own (the segmentation's memory of the last frame forgotten:
@@ -263,10 +273,13 @@ void BM_RealStillsSegmentationPairedWithHSV(benchmark::State& st) {
     return;
   }
   InstrumentSegmenter seg;
+  double strips = 0.0, calls = 0.0;
   pairedWithHSV(st, f, [&](cv::Mat const& im) {
     seg.reset();
-    benchmark::DoNotOptimize(seg.process(im));
+    strips += seg.process(im).strip_searches;
+    calls += 1.0;
   });
+  st.counters["strip_searches"] = strips / std::max(1.0, calls);  // per still
   st.counters["frames"] = static_cast<double>(f.images.size());
 }
 

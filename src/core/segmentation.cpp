@@ -266,10 +266,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     auto tryStrip = [&](StripCandidate const* previous) {
       if (!have_gradient) {
         cv::spatialGradient(filtered_, gx_, gy_, 3);  // both 3x3 Sobel derivatives in one pass (as cv::Sobel, half the time)
+        rays_ = packRayField(gx_, gy_, fov_);          // (one load per step of the ray walks)
         have_gradient = true;
       }
       ++res.strip_searches;
-      auto sc = searchStrip(filtered_, gx_, gy_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
+      auto sc = searchStrip(filtered_, rays_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
       if (!sc) return;
       ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
       if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {

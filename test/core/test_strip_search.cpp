@@ -327,14 +327,51 @@ TEST(StripSearch, SimdWalkEqualsTheScalarWalk) {
   }
   EXPECT_GT(long_sides, 10);
   EXPECT_GT(gap_ends, 10);
-  for (std::size_t batch : {1u, 2u, 3u, 4u, 5u, 9u, 400u}) {
-    for (std::size_t i = 0; i < rays.size(); i += batch) {
-      std::vector<StripRay> part(rays.begin() + static_cast<long>(i), rays.begin() + static_cast<long>(std::min(rays.size(), i + batch)));
-      walkRays(part, gx, gy, fov, p);
-      for (std::size_t j = 0; j < part.size(); ++j) {
-        ASSERT_EQ(part[j].score, scalar[i + j].score) << "ray " << i + j << " batch " << batch;
-        ASSERT_EQ(part[j].length, scalar[i + j].length) << "ray " << i + j << " batch " << batch;
+  // Eight lanes with AVX2 (the packed field gathered), four without it or with OpenCV's
+  // optimisations off; from the gradient or from the field packed once.
+  RayField const field = packRayField(gx, gy, fov);
+  for (bool optimised : {true, false}) {
+    cv::setUseOptimized(optimised);
+    for (bool packed : {false, true})
+      for (std::size_t batch : {1u, 2u, 3u, 4u, 5u, 8u, 9u, 17u, 400u}) {
+        for (std::size_t i = 0; i < rays.size(); i += batch) {
+          std::vector<StripRay> part(rays.begin() + static_cast<long>(i), rays.begin() + static_cast<long>(std::min(rays.size(), i + batch)));
+          if (packed) walkRays(part, field, p);
+          else walkRays(part, gx, gy, fov, p);
+          for (std::size_t j = 0; j < part.size(); ++j) {
+            ASSERT_EQ(part[j].score, scalar[i + j].score) << "ray " << i + j << " batch " << batch << " optimised " << optimised;
+            ASSERT_EQ(part[j].length, scalar[i + j].length) << "ray " << i + j << " batch " << batch << " optimised " << optimised;
+          }
+        }
       }
-    }
   }
+  cv::setUseOptimized(true);
+}
+
+// The packed field: each pixel's gradient and whether it is inside the view, read back exactly
+// (signs, the extremes of a 3x3 Sobel of 8-bit data); a gradient out of range is refused.
+TEST(StripSearch, RayFieldPacksGradientAndView) {
+  cv::Mat img(40, 50, CV_8UC3, cv::Scalar(0, 0, 0));
+  cv::rectangle(img, {5, 5}, {44, 34}, cv::Scalar(60, 80, 190), cv::FILLED);
+  FieldOfView const fov = detectFieldOfView(img);
+  ASSERT_TRUE(fov.valid());
+  cv::Mat gx(40, 50, CV_16S), gy(40, 50, CV_16S);
+  cv::RNG(3).fill(gx, cv::RNG::UNIFORM, -1020, 1021);
+  cv::RNG(4).fill(gy, cv::RNG::UNIFORM, -1020, 1021);
+  gx.at<std::int16_t>(0, 0) = -1020;
+  gy.at<std::int16_t>(0, 1) = 1020;
+  gy.at<std::int16_t>(0, 2) = -16383;
+  RayField const f = packRayField(gx, gy, fov);
+  ASSERT_EQ(f.packed.type(), CV_32S);
+  for (int y = 0; y < 40; ++y)
+    for (int x = 0; x < 50; ++x) {
+      std::int32_t const v = f.packed.at<std::int32_t>(y, x);
+      ASSERT_EQ(static_cast<std::int16_t>(v & 0xffff), gx.at<std::int16_t>(y, x)) << x << "," << y;
+      ASSERT_EQ((v >> 16) >> 1, gy.at<std::int16_t>(y, x)) << x << "," << y;
+      ASSERT_EQ((v >> 16) & 1, fov.mask.at<std::uint8_t>(y, x) ? 1 : 0) << x << "," << y;
+    }
+  gy.at<std::int16_t>(3, 3) = 16384;
+  EXPECT_THROW(packRayField(gx, gy, fov), cv::Exception);
+  gy.at<std::int16_t>(3, 3) = -16384;
+  EXPECT_THROW(packRayField(gx, gy, fov), cv::Exception);
 }

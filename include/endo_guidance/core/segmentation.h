@@ -134,6 +134,7 @@ class InstrumentSegmenter {
   int scale_ = 1;
   int since_detection_ = 0;  // tracking frames since the last detection frame
   cv::Mat small_, raw_, filtered_, labels_, gx_, gy_;
+  RayField rays_;  // gx_, gy_ and the field of view packed for the strip search (packRayField())
 };
 
 /// Whether contour c is a second detection of one of the shafts already found: its entry and tip

@@ -55,7 +55,19 @@ struct StripRay {
 /// it stops (jaws, tip, or the start of a leak), where it leaves the image or (after its first
 /// 4 px) the field of view, or 8 below its best. Sets score and length.
 void walkRay(StripRay& ray, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov, StripSearchParams const& params);
-/// walkRay() for every ray, four at a time in SIMD lanes: the same results, bit for bit.
+/// The gradient and the field of view packed for the ray walks (one 32-bit load per step
+/// instead of three): per pixel (2 gy + inside) << 16 | (gx & 0xffff), inside = 1 within the
+/// field of view's mask. Built once per frame (packRayField()).
+struct RayField {
+  cv::Mat packed;  ///< CV_32S, continuous; empty: no field
+};
+/// gx, gy: CV_16S of the field of view's size, every |value| below 16384 (a 3x3 Sobel of 8-bit
+/// data is within 1020); otherwise cv::Exception.
+RayField packRayField(cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov);
+/// walkRay() for every ray, several at a time in SIMD lanes (eight with AVX2, else four): the
+/// same results, bit for bit.
+void walkRays(std::vector<StripRay>& rays, RayField const& field, StripSearchParams const& params);
+/// The same, packing the field first (packRayField()).
 void walkRays(std::vector<StripRay>& rays, cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov,
               StripSearchParams const& params);
 
@@ -75,6 +87,10 @@ struct StripCandidate {
   double score = 0.0;
   std::array<Eigen::Vector2d, 2> start, dir;  ///< the two sides' rays (processing px)
 };
+std::optional<StripCandidate> searchStrip(cv::Mat const& feature, RayField const& field, FieldOfView const& fov, Seed const& seed,
+                                          int level, int scale, StripSearchParams const& params, ContourLinesParams const& lines,
+                                          StripCandidate const* previous = nullptr);
+/// The same from the gradient (packRayField() first).
 std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
                                           FieldOfView const& fov, Seed const& seed, int level, int scale,
                                           StripSearchParams const& params, ContourLinesParams const& lines,
