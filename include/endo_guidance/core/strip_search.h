@@ -79,8 +79,9 @@ void walkRays(std::vector<StripRay>& rays, cv::Mat const& gx, cv::Mat const& gy,
 /// sum(min(g.n / g_full, 1) - min_response). Sides are paired by parallelism (contours of a
 /// cylinder meet at most max_angle apart), a shaft-like interior and no crossing. The result is
 /// a SideFit for refineContour() (full-resolution sub-pixel lines) and the strip as its region.
-/// `gx`, `gy`: CV_16S Sobel of `feature`; `level`: feature value at or below which the interior
-/// is shaft-like. `previous`: this shaft's strip in the last frame (video), searched about only.
+/// `field`: packRayField() of the CV_16S Sobel of `feature` and of `fov` (the second form packs
+/// it from `gx`, `gy`); `level`: feature value at or below which the interior is shaft-like.
+/// `previous`: this shaft's strip in the last frame (video), searched about only.
 struct StripCandidate {
   SideFit sides;
   Region region;
