@@ -53,19 +53,21 @@ void walkRay(StripRay& r, cv::Mat const& gx, cv::Mat const& gy, FieldOfView cons
 
 RayField packRayField(cv::Mat const& gx, cv::Mat const& gy, FieldOfView const& fov) {
   checkGradient(gx, gy, fov);
-  double lo = 0.0, hi = 0.0;
-  cv::minMaxLoc(gy, &lo, &hi);
-  CV_Assert(lo > -16384.0 && hi < 16384.0);  // 2 gy + 1 in 16 bits
   RayField f;
   f.packed.create(gx.size(), CV_32S);
+  int lo = 0, hi = 0;  // gy's range, checked after the one pass
   for (int y = 0; y < gx.rows; ++y) {
     std::int16_t const* a = gx.ptr<std::int16_t>(y);
     std::int16_t const* b = gy.ptr<std::int16_t>(y);
     std::uint8_t const* m = fov.mask.ptr<std::uint8_t>(y);
     std::uint32_t* o = f.packed.ptr<std::uint32_t>(y);
-    for (int x = 0; x < gx.cols; ++x)
+    for (int x = 0; x < gx.cols; ++x) {
+      lo = std::min(lo, static_cast<int>(b[x]));
+      hi = std::max(hi, static_cast<int>(b[x]));
       o[x] = (static_cast<std::uint32_t>(2 * b[x] + (m[x] != 0)) << 16) | static_cast<std::uint16_t>(a[x]);
+    }
   }
+  CV_Assert(lo > -16384 && hi < 16384);  // 2 gy + 1 in 16 bits
   return f;
 }
 
