@@ -64,6 +64,12 @@ Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const
     : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
       points_(outOfViewOptions(params.insertion_points, K, size)), tracker_(params.tracking) {}
 
+void Pipeline::reset() {
+  segmenter_.reset();
+  points_ = InsertionPointSet(outOfViewOptions(params_.insertion_points, K_, size_));
+  tracker_ = ShaftTracker(params_.tracking);
+}
+
 PipelineOutput Pipeline::process(cv::Mat const& bgr) {
   auto const t0 = std::chrono::steady_clock::now();
   PipelineOutput out;

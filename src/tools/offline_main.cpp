@@ -42,7 +42,7 @@ void usage(std::FILE* f) {
   std::fprintf(f,
                "usage: endo_guidance_offline [--camera CAMERA.yaml] --radius METRES [--params PARAMS.yaml]\n"
                "                             [--output OUT.jsonl] [--overlay DIR|VIDEO] [--image-topic TOPIC]\n"
-               "                             [--fps HZ] [--truth TRUTH.yaml] [--quiet] INPUT...\n"
+               "                             [--fps HZ] [--truth TRUTH.yaml] [--independent] [--quiet] INPUT...\n"
                "  INPUT: image files, a directory of images (sorted by name), a video file, or a bag\n"
                "         (--image-topic; its camera_info is used when present).\n"
                "  CAMERA.yaml: ROS camera_info YAML (camera_calibration_parsers format); distorted\n"
@@ -50,6 +50,9 @@ void usage(std::FILE* f) {
                "  --output: one JSON object per frame (default: standard output).\n"
                "  --overlay: a directory (one PNG per frame) or a video file (.avi/.mp4/.mkv).\n"
                "  --fps: time stamps of image files, and of a video without a frame rate (default 25).\n"
+               "  --independent: each frame on its own (unrelated stills): the pipeline forgets every\n"
+               "         earlier frame (seed levels, tracks, insertion points) before it; by default the\n"
+               "         frames are one video, in order.\n"
                "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n");
 }
 
@@ -263,7 +266,7 @@ std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
 int main(int argc, char** argv) {
   std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path;
   double radius = -1.0, fps = 25.0;
-  bool quiet = false;
+  bool quiet = false, independent = false;
   std::vector<std::string> inputs;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
@@ -283,6 +286,7 @@ int main(int argc, char** argv) {
     else if (a == "--fps") fps = std::atof(value().c_str());
     else if (a == "--truth") truth_path = value();
     else if (a == "--quiet") quiet = true;
+    else if (a == "--independent") independent = true;
     else if (a == "-h" || a == "--help") {
       usage(stdout);
       return 0;
@@ -382,6 +386,7 @@ int main(int argc, char** argv) {
         } else {
           cv::Mat img = f.image;
           if (!map1.empty() && img.size() == cv::Size(cam->width, cam->height)) cv::remap(f.image, img, map1, map2, cv::INTER_LINEAR);
+          if (independent) pipe.reset();
           out = pipe.process(img);
           if (out.error.empty()) last = out;
           if (!overlay.empty() && out.error.empty()) {

@@ -61,6 +61,51 @@ TEST(Pipeline, TrocarsFromRenderedVideoAndNoGauze) {
   EXPECT_EQ(late_false, 0);
 }
 
+// reset(): after a video (insertion points found, seed levels and tracks remembered) the next
+// frame is processed exactly as by a new Pipeline, and no insertion point is left; without it the
+// same frame comes out otherwise (the seed search focused by the trocars, attachments, track ids).
+TEST(Pipeline, ResetForgetsEveryFrame) {
+  SyntheticSceneOptions so;
+  SyntheticScene scene(defaultInstruments(), so);
+  SceneRenderer renderer(so.width, so.height, RenderOptions{});
+  Pipeline p(so.K, {so.width, so.height});
+  // Frames 0-79, then 200 (a jump: the shafts there get new track ids), then the still is 201
+  // (the segmentation's memory of 200 applies to it).
+  for (int k = 0; k < 80; ++k) ASSERT_TRUE(p.process(renderer.render(scene.frame(k), k)).error.empty());
+  ASSERT_TRUE(p.process(renderer.render(scene.frame(200), 200)).error.empty());
+  cv::Mat const still = renderer.render(scene.frame(201), 201);
+  Pipeline carried = p;
+  PipelineOutput const with_memory = carried.process(still);
+  ASSERT_FALSE(with_memory.insertion_points.empty());
+  p.reset();
+  PipelineOutput const after = p.process(still);
+  PipelineOutput const fresh = Pipeline(so.K, {so.width, so.height}).process(still);
+  EXPECT_TRUE(after.insertion_points.empty());
+  ASSERT_EQ(after.instruments.size(), fresh.instruments.size());
+  ASSERT_GE(after.instruments.size(), 2u);
+  for (std::size_t i = 0; i < after.instruments.size(); ++i) {
+    InstrumentObservation const &a = after.instruments[i], &b = fresh.instruments[i];
+    EXPECT_EQ(a.contour.lines, b.contour.lines) << i;
+    EXPECT_EQ(a.contour.tip_px, b.contour.tip_px) << i;
+    EXPECT_EQ(a.track, b.track) << i;
+    EXPECT_EQ(a.insertion_point, b.insertion_point) << i;
+    EXPECT_EQ(a.pose.axis.direction(), b.pose.axis.direction()) << i;
+  }
+  // The segmentation's own memory forgotten too: the same regions grown, at the same levels.
+  ASSERT_EQ(after.segmentation.regions.size(), fresh.segmentation.regions.size());
+  for (std::size_t i = 0; i < after.segmentation.regions.size(); ++i) {
+    EXPECT_EQ(after.segmentation.regions[i].threshold, fresh.segmentation.regions[i].threshold) << i;
+    EXPECT_EQ(after.segmentation.regions[i].area, fresh.segmentation.regions[i].area) << i;
+  }
+  EXPECT_EQ(after.segmentation.strip_searches, fresh.segmentation.strip_searches);
+  bool differs = with_memory.instruments.size() != fresh.instruments.size() ||
+                 with_memory.segmentation.regions.size() != fresh.segmentation.regions.size();
+  for (std::size_t i = 0; !differs && i < fresh.instruments.size(); ++i)
+    differs = with_memory.instruments[i].insertion_point != fresh.instruments[i].insertion_point ||
+              with_memory.instruments[i].track != fresh.instruments[i].track;
+  EXPECT_TRUE(differs) << "the frame after a video should come out otherwise without reset()";
+}
+
 // Shaft identities: each synthetic instrument keeps one track id while it moves; a shaft that
 // appears elsewhere gets a new id.
 TEST(ShaftTracking, IdsFollowTheInstruments) {

@@ -122,6 +122,26 @@ for k, r in enumerate(rows):
 assert sum(len(r["instruments"]) for r in rows) > 60
 print("offline bag ok:", len(rows), "frames, stamps to the microsecond")
 PY
+# --independent: unrelated stills, each on its own. Three frames of the video far apart, in one
+# run, give each what a run on that image alone gives (as one video, without the option, the
+# second frame's shafts get track ids 3-5), and no insertion point.
+mkdir "$T/stills"
+for k in 000005 000070 000110; do cp "$T/seq/frames/$k.png" "$T/stills/"; done
+"$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" --radius 0.004 --independent --output "$T/ind.jsonl" --quiet "$T/stills"
+for k in 000005 000070 000110; do
+  "$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" --radius 0.004 --quiet "$T/stills/$k.png" >> "$T/one.jsonl"
+done
+/usr/bin/python3 - "$T/ind.jsonl" "$T/one.jsonl" <<'PY'
+import json, sys
+ind = [json.loads(l) for l in open(sys.argv[1])]
+one = [json.loads(l) for l in open(sys.argv[2])]
+assert len(ind) == len(one) == 3
+for a, b in zip(ind, one):
+    assert a["instruments"] == b["instruments"], (a["source"], a["instruments"], b["instruments"])
+    assert a["insertion_points"] == [], a["insertion_points"]
+assert all(len(a["instruments"]) >= 2 for a in ind), [len(a["instruments"]) for a in ind]
+print("offline --independent ok: each still as on its own")
+PY
 # Bad arguments and bad camera files fail with a message, not a crash.
 if "$BIN/endo_guidance_offline" --camera "$T/seq/camera.yaml" "$T/seq/frames" 2>/dev/null; then exit 1; fi
 sed 's/data: \[500/data: [0/' "$T/seq/camera.yaml" > "$T/zero.yaml"

@@ -84,6 +84,10 @@ class Pipeline {
   /// K: intrinsics of the (rectified) images; size: their expected size.
   Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params = {});
   PipelineOutput process(cv::Mat const& bgr);
+  /// Forgets every frame seen: the segmentation's memory (seed levels, tracked shafts, field of
+  /// view), the insertion points and the shaft tracks. The next process() gives what a new
+  /// Pipeline with the same arguments would (unrelated stills: each on its own).
+  void reset();
   InsertionPointSet& insertionPoints() { return points_; }
   Eigen::Matrix3d const& K() const { return K_; }
   cv::Size size() const { return size_; }
