@@ -824,15 +824,24 @@ void setFarEnd(SideFit& fit) {
       }
 }
 
-SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p, SideSearch search) {
-  SideFit fit;
+namespace {
+
+// What every side search of a region shares (fitSides()): which boundary points lie on the
+// view's border, whether the region meets it more than once, the two chains that leave the
+// entry and each side followed from the entry.
+struct SideChains {
+  std::vector<unsigned char> border;
+  bool merged = false;
+  std::vector<Eigen::Vector2d> chain[2];
+  std::optional<FollowedSide> fwd[2];
+};
+
+SideChains sideChains(Region const& region, FieldOfView const& fov, ContourLinesParams const& p) {
+  SideChains sc;
   auto const& B = region.boundary;
   int const n = static_cast<int>(B.size());
-  auto reject = [&](ContourRejection r) {
-    fit.rejection = r;
-    return fit;
-  };
-  if (n < 2 * p.min_side_points) return reject(ContourRejection::kTooFewPoints);
+  auto& border = sc.border;
+  auto& chain = sc.chain;
   // Boundary points on (near) the FOV edge belong to the entry, not to a contour line.
   auto onBorder = [&](cv::Point const& q) {
     int const m = p.border_margin;
@@ -843,12 +852,12 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
     }
     return false;
   };
-  std::vector<unsigned char> border(static_cast<std::size_t>(n));
+  border.resize(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) border[i] = onBorder(B[i]);
   // A region that meets the border in several places has merged with another instrument.
   int runs = 0;
   for (int i = 0; i < n; ++i) runs += border[i] && !border[(i + n - 1) % n];
-  fit.merged = runs >= 2;
+  sc.merged = runs >= 2;
   // The two classes ([Doignon07] Sec. 3) are the two boundary chains that leave the entry (the
   // seed's border run), one along each side; for a lone shaft they meet at the boundary point
   // farthest from the seed, the paper's split point. Following each side from the entry (rather
@@ -863,7 +872,6 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
       s0 = i;
     }
   }
-  std::vector<Eigen::Vector2d> chain[2];
   for (int dirn = 0; dirn < 2; ++dirn) {
     int const step = dirn == 0 ? 1 : -1;
     int k = 0;
@@ -874,6 +882,23 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
       chain[dirn].emplace_back(B[i].x, B[i].y);
     }
   }
+  for (int s = 0; s < 2; ++s) sc.fwd[s] = followSide(chain[s], fov, p, p.seed + s);
+  return sc;
+}
+
+SideFit fitSidesFrom(SideChains const& sc, Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p,
+                     SideSearch search) {
+  SideFit fit;
+  auto const& B = region.boundary;
+  int const n = static_cast<int>(B.size());
+  auto const& border = sc.border;
+  auto const& chain = sc.chain;
+  auto const& fwd = sc.fwd;
+  fit.merged = sc.merged;
+  auto reject = [&](ContourRejection r) {
+    fit.rejection = r;
+    return fit;
+  };
   // Each side followed from the entry ([Doignon07]'s two classes). A region merged with a grey
   // blob near the entry (gauze) has one side that is not a straight line from there: that side
   // is then the straight stretch of its chain, up to the point farthest from the seed, that
@@ -899,8 +924,6 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
     }
     return ContourRejection::kNone;
   };
-  std::optional<FollowedSide> fwd[2];
-  for (int s = 0; s < 2; ++s) fwd[s] = followSide(chain[s], fov, p, p.seed + s);
   ContourRejection why = ContourRejection::kNone;
   for (int s = 0; s < 2 && why == ContourRejection::kNone; ++s)
     if (!fwd[s])
@@ -982,6 +1005,26 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
   for (int s = 0; s < 2; ++s)
     if (fit.lines[s].head<2>().dot(inside) + fit.lines[s].z() < 0.0) fit.lines[s] = -fit.lines[s];
   return fit;
+}
+
+}  // namespace
+
+SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p, SideSearch search) {
+  return fitSidesEach(region, fov, scale, p, {search}).front();
+}
+
+std::vector<SideFit> fitSidesEach(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p,
+                                  std::vector<SideSearch> const& searches) {
+  std::vector<SideFit> out;
+  if (static_cast<int>(region.boundary.size()) < 2 * p.min_side_points) {
+    SideFit f;
+    f.rejection = ContourRejection::kTooFewPoints;
+    out.assign(searches.size(), f);
+    return out;
+  }
+  SideChains const sc = sideChains(region, fov, p);
+  for (SideSearch const s : searches) out.push_back(fitSidesFrom(sc, region, fov, scale, p, s));
+  return out;
 }
 
 namespace {

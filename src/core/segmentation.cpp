@@ -330,8 +330,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // none was found in a region another seed grew): re-sought candidates.
     auto reseek = [&](Region const& region, int level) {
       if (params_.contours.min_parallel_side_ratio <= 0.0) return;
-      for (SideSearch const search : {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}) {
-        SideFit again = fitSides(region, view, scale, params_.contours, search);
+      for (SideFit& again : fitSidesEach(region, view, scale, params_.contours,
+                                         {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair})) {
         if (again.rejection != ContourRejection::kNone) continue;
         double const score = scoreSides(again, bgr, params_.contours);
         if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});

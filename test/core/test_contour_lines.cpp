@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -678,6 +680,42 @@ TEST(ContourLines, StraightStretchSearchIsTheSameInEveryPath) {
     }
   }
   cv::setUseOptimized(true);
+}
+
+// fitSidesEach(): the searches on one region, sharing its chains and the sides followed from the
+// entry, give each what fitSides() gives alone (the merged shafts above, every search, in two
+// orders; a region too small for two sides is refused for each search).
+TEST(ContourLines, SidesSoughtEachWayAtOnceAreTheSameAsOneByOne) {
+  std::vector<SideSearch> const all{SideSearch::kFromEntry, SideSearch::kParallelFirst, SideSearch::kParallelSecond,
+                                    SideSearch::kStretchPair};
+  ContourLinesParams const p;
+  for (bool both : {false, true}) {
+    auto const m = mergedShaft(both, both);
+    ASSERT_TRUE(m.region);
+    for (bool reversed : {false, true}) {
+      std::vector<SideSearch> order = all;
+      if (reversed) std::reverse(order.begin(), order.end());
+      std::vector<SideFit> const each = fitSidesEach(*m.region, m.fov, 2, p, order);
+      ASSERT_EQ(each.size(), order.size());
+      int found = 0;
+      for (std::size_t i = 0; i < order.size(); ++i) {
+        SideFit const one = fitSides(*m.region, m.fov, 2, p, order[i]);
+        ASSERT_EQ(each[i].rejection, one.rejection) << i;
+        EXPECT_EQ(each[i].parallel, one.parallel) << i;
+        EXPECT_EQ(each[i].merged, one.merged) << i;
+        for (int k = 0; k < 2; ++k) {
+          EXPECT_EQ(each[i].lines[k], one.lines[k]) << i;
+          EXPECT_EQ(each[i].points[k], one.points[k]) << i;
+        }
+        found += one.rejection == ContourRejection::kNone;
+      }
+      EXPECT_GE(found, 1);
+    }
+  }
+  Region tiny;
+  tiny.boundary = {{0, 0}, {1, 0}, {1, 1}};
+  FieldOfView fov;
+  for (SideFit const& f : fitSidesEach(tiny, fov, 1, p, all)) EXPECT_EQ(f.rejection, ContourRejection::kTooFewPoints);
 }
 
 TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {

@@ -196,6 +196,11 @@ struct SideFit {
 enum class SideSearch { kFromEntry, kParallelFirst, kParallelSecond, kStretchPair };
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params,
                  SideSearch search = SideSearch::kFromEntry);
+/// fitSides() with each of `searches` on one region (a fit per search, in order), the part they
+/// share done once: the boundary's points on the view's border, the two chains from the entry
+/// and the sides followed from it (the costliest part of a search: LMedS along each chain).
+std::vector<SideFit> fitSidesEach(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params,
+                                  std::vector<SideSearch> const& searches);
 /// Sets fit.far to the side point farthest from fit.entry.
 void setFarEnd(SideFit& fit);
 /// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge
