@@ -1007,22 +1007,26 @@ SideFit fitSidesFrom(SideChains const& sc, Region const& region, FieldOfView con
   return fit;
 }
 
+// A boundary too short for two sides: refused before anything is computed.
+std::optional<SideFit> tooShortForSides(Region const& region, ContourLinesParams const& p) {
+  if (static_cast<int>(region.boundary.size()) >= 2 * p.min_side_points) return std::nullopt;
+  SideFit f;
+  f.rejection = ContourRejection::kTooFewPoints;
+  return f;
+}
+
 }  // namespace
 
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p, SideSearch search) {
-  return fitSidesEach(region, fov, scale, p, {search}).front();
+  if (auto f = tooShortForSides(region, p)) return *f;
+  return fitSidesFrom(sideChains(region, fov, p), region, fov, scale, p, search);
 }
 
 std::vector<SideFit> fitSidesEach(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p,
                                   std::vector<SideSearch> const& searches) {
-  std::vector<SideFit> out;
-  if (static_cast<int>(region.boundary.size()) < 2 * p.min_side_points) {
-    SideFit f;
-    f.rejection = ContourRejection::kTooFewPoints;
-    out.assign(searches.size(), f);
-    return out;
-  }
+  if (auto f = tooShortForSides(region, p)) return std::vector<SideFit>(searches.size(), *f);
   SideChains const sc = sideChains(region, fov, p);
+  std::vector<SideFit> out;
   for (SideSearch const s : searches) out.push_back(fitSidesFrom(sc, region, fov, scale, p, s));
   return out;
 }
