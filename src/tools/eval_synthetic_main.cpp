@@ -178,9 +178,9 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
         R.dist_signed.push_back((pose.pose.distance - v.axis.distanceToOrigin()) / v.axis.distanceToOrigin());
         R.dist_rel.push_back(std::abs(R.dist_signed.back()));
         R.by_length.push_back({(v.truth.tip_px - v.truth.entry_px).norm(), R.dir_deg.back(), R.dist_rel.back()});
-        // The same axis through the located insertion point the pipeline attached it to.
-        R.dir_best.push_back(R.dir_deg.back());
+        R.dir_best.push_back(R.dir_deg.back());  // (replaced below by the axis through its trocar, if any)
         R.dist_best.push_back(R.dist_rel.back());
+        // The same axis through the located insertion point the pipeline attached it to.
         for (auto const& o : out.instruments) {
           if (o.contour.lines != c.lines) continue;
           if (auto const f = axisThroughInsertionPoint(pose.pose, o.insertion_point, out.insertion_points,
