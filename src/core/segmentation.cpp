@@ -244,7 +244,9 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       m.threshold = T[m.level];
       memory_now.push_back(std::move(m));
     };
-    if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every) {
+    // (A memory kept over a frame without its run, see below, holds only for a run of its width.)
+    if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every &&
+        !(mem->carried && runChanged(*mem, seed.width))) {
       // (a seed whose regions all leaked has none to claim)
       if (auto r = mem->grown ? grower_.grow(seed.position, T[mem_level], si) : std::nullopt) {
         res.regions.push_back(*r);
@@ -466,7 +468,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // benchmark's scene such seeds in the dark tissue where the left shaft enters took 14 % of
     // the pipeline's time.
     bool const strip_run = !best && !crossing && params_.strip.enabled && seed.mean_value <= params_.seeds.threshold &&
-                           stripSearchDue(mem, seed, elapsed);
+                           stripSearchDue(mem, seed.width, elapsed);
     if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
     while (!best && !resought.empty()) {  // (a re-sought pair is a parallel one: it re-seeks nothing)
@@ -545,6 +547,21 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
   }
   labels_ = grower_.labels();
+  // A refused seed's run that is missing in this frame (a run near the seed threshold flickers:
+  // robotic Dataset 1, about one seed per frame) keeps its memory while a full or strip search
+  // of it would not be due yet: when the run is back it is not searched in full as a new seed.
+  for (Memory const& m : memory_) {
+    if (m.accepted || (m.age + elapsed >= params_.full_search_every && stripSearchDue(&m, m.width, elapsed))) continue;
+    bool const seen = std::any_of(memory_now.begin(), memory_now.end(), [&](Memory const& n) {
+      return std::abs(n.entry.x - m.entry.x) + std::abs(n.entry.y - m.entry.y) <= params_.level_memory_px;
+    });
+    if (seen) continue;
+    Memory c = m;
+    c.carried = true;
+    c.age += elapsed;
+    c.strip_age += elapsed;
+    memory_now.push_back(std::move(c));
+  }
   memory_ = std::move(memory_now);
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
@@ -678,12 +695,16 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
   return best;
 }
 
+// Whether a seed's border run is now of another width than its memory's (by more than a quarter):
+// something entered or left there.
+bool InstrumentSegmenter::runChanged(Memory const& m, int width) { return std::abs(width - m.width) * 4 > std::max(width, m.width); }
+
 // The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
 // frame) runs at its full searches, but the interval doubles per failure up to
 // strip_search_max_every frames. Always for a new seed, a lost shaft, or a run that changed width.
-bool InstrumentSegmenter::stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const {
+bool InstrumentSegmenter::stripSearchDue(Memory const* m, int width, int elapsed) const {
   if (!m || m->accepted || m->strip_fails == 0) return true;
-  if (std::abs(seed.width - m->width) * 4 > std::max(seed.width, m->width)) return true;  // its run changed: something entered
+  if (runChanged(*m, width)) return true;
   int every = std::max(1, params_.full_search_every);
   for (int k = 1; k < m->strip_fails && every < params_.strip_search_max_every; ++k) every *= 2;
   return m->strip_age + elapsed >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));

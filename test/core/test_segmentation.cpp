@@ -564,6 +564,38 @@ TEST(Segmentation, ASeedOnlyUnderTheRelaxedThresholdHasNoStripSearch) {
   EXPECT_TRUE(ordinary.contours.empty());
 }
 
+// A refused seed whose border run is missing for a frame (a run near the seed threshold
+// flickers in a video) keeps its memory: when the run is back, its region is only claimed again,
+// not searched in full (no strip search) until a search is due. Unless the run came back of
+// another width: something entered there (a shaft entering where the blob was is found at once).
+TEST(Segmentation, ARefusedSeedMissingForAFrameKeepsItsMemory) {
+  auto blob = [](int half_height) {
+    cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+    cv::ellipse(im, {0, 240}, {120, half_height}, 0.0, 0.0, 360.0, cv::Scalar(100, 104, 123), -1, cv::LINE_AA);
+    return im;
+  };
+  cv::Mat const tissue(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+  InstrumentSegmenter seg;
+  auto const first = seg.process(blob(70));
+  ASSERT_FALSE(first.seeds.empty());
+  EXPECT_GE(first.strip_searches, 1);
+  EXPECT_TRUE(first.contours.empty());
+  EXPECT_TRUE(seg.process(tissue).seeds.empty());
+  auto const back = seg.process(blob(70));
+  ASSERT_FALSE(back.seeds.empty());
+  EXPECT_EQ(back.strip_searches, 0);
+  EXPECT_FALSE(back.regions.empty());  // claimed again
+  EXPECT_TRUE(back.contours.empty());
+  // Missing again, then back twice as wide: searched in full.
+  seg.process(tissue);
+  EXPECT_GE(seg.process(blob(140)).strip_searches, 1);
+  // Missing, then a shaft enters where the blob was: found in that frame.
+  seg.process(blob(70));
+  seg.process(tissue);
+  auto const shaft = seg.process(greyBarOnTissue({-10.0, 240.0}, {420.0, 220.0}));
+  EXPECT_EQ(shaft.contours.size(), 1u);
+}
+
 // The hard rendered scene through the pipeline, frames 200-283: in frame 283 the left
 // instrument's jaws touch the right shaft's lower side. The right shaft's region seen again from
 // its entry (the region refused for another seed) has its lower side re-sought, and one

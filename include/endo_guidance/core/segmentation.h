@@ -119,9 +119,11 @@ class InstrumentSegmenter {
     bool grown = true;      // a region was kept (false: every level leaked)
     bool parallel = false;  // accepted with a side parallel to the other (SideFit::parallel: merged with a blob)
     int threshold = 0;      // the growth threshold of `level` (an absolute level added above the lowered ones is found again by it)
+    bool carried = false;   // kept from an earlier frame: no seed was near it in the last one
   };
   Memory const* remembered(Seed const& seed) const;
-  bool stripSearchDue(Memory const* m, Seed const& seed, int elapsed) const;
+  static bool runChanged(Memory const& m, int width);
+  bool stripSearchDue(Memory const* m, int width, int elapsed) const;  // width: of the seed's run now
   void addCrossingSeeds(SegmentationResult& res, std::vector<std::vector<cv::Point>> const& strips,
                         std::vector<int> const& strip_labels, std::deque<FieldOfView>& views, std::vector<int>& view_shafts,
                         std::vector<int>& seed_view) const;
