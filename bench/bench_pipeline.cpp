@@ -252,15 +252,17 @@ void BM_RealVideoPairedWithHSV(benchmark::State& st) {
     return;
   }
   Pipeline p(f.K, f.images[0].size());
-  double strips = 0.0, shafts = 0.0, calls = 0.0;
+  double strips = 0.0, full = 0.0, shafts = 0.0, calls = 0.0;
   pairedWithHSV(st, f, [&](cv::Mat const& im) {
     auto const out = p.process(im);
     strips += out.segmentation.strip_searches;
+    full += out.segmentation.full_searches;
     shafts += static_cast<double>(out.instruments.size());
     calls += 1.0;
   });
   st.counters["frames"] = static_cast<double>(f.images.size());
   st.counters["strip_searches"] = strips / std::max(1.0, calls);  // per frame
+  st.counters["full_searches"] = full / std::max(1.0, calls);     // seeds grown at every level, per frame
   st.counters["shafts"] = shafts / std::max(1.0, calls);          // reported per frame
 }
 

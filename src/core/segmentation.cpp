@@ -230,7 +230,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     // best ones in full until one is accepted. In a video, a seed near last frame's entry of a
     // shaft tries that shaft's level first and stops there if it scores as well as before; a
     // seed near last frame's rejected region only re-grows that region (to claim it) and is
-    // searched in full again every `full_search_every` frames (its strip search: stripSearchDue()).
+    // searched in full again every `full_search_every` frames, then less often while it keeps
+    // giving no shaft (fullSearchDue(); its strip search: stripSearchDue()).
     // Growth levels (region_growing.h): the thresholds, lowered toward the seed's level on a dark
     // border and followed there by the absolute ones above them (hard scene frames 0-39: the left
     // shaft beside the gauze was grown only below its metal's level).
@@ -244,18 +245,26 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       m.threshold = T[m.level];
       memory_now.push_back(std::move(m));
     };
-    // (A memory kept over a frame without its run, see below, holds only for a run of its width.)
-    if (!in_refused && mem && !mem->accepted && mem->age + elapsed < params_.full_search_every &&
-        !(mem->carried && runChanged(*mem, seed.width))) {
+    // A refused seed: its region grown again at its level and claimed, until a full search is
+    // due (fullSearchDue(): backing off while it keeps giving no shaft).
+    if (!in_refused && mem && !mem->accepted && !fullSearchDue(*mem, seed.width, elapsed)) {
       // (a seed whose regions all leaked has none to claim)
-      if (auto r = mem->grown ? grower_.grow(seed.position, T[mem_level], si) : std::nullopt) {
-        res.regions.push_back(*r);
-        res.region_status.push_back(mem->why);
-        grower_.claim(*r, 255);
+      std::optional<Region> r = mem->grown ? grower_.grow(seed.position, T[mem_level], si) : std::nullopt;
+      // (backed off beyond full_search_every: its region must be as it was, see fullSearchDue())
+      bool const changed = mem->age + elapsed >= params_.full_search_every && r && mem->area > 0 &&
+                           std::abs(r->area - mem->area) > params_.refused_area_change * std::max(r->area, mem->area);
+      if (!changed) {
+        if (r) {
+          res.regions.push_back(*r);
+          res.region_status.push_back(mem->why);
+          grower_.claim(*r, 255);
+        }
+        remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails,
+                  seed.width, std::nullopt, mem->grown});
+        memory_now.back().fails = mem->fails;
+        memory_now.back().area = mem->area;  // (the last full search's: a slow change adds up)
+        continue;
       }
-      remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails, seed.width,
-                std::nullopt, mem->grown});
-      continue;
     }
     std::optional<Region> best;
     ContourFit best_fit;
@@ -419,6 +428,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     std::vector<int> all(T.size());
     std::iota(all.begin(), all.end(), 0);
     if (in_refused) {
+      ++res.full_searches;
       // The refused region seen from this seed's border run: its two sides are split at this
       // entry, not at the other seed's (a shaft merged with a blob that entered the view
       // elsewhere and was searched first: gauze reaching another border). A re-sought candidate;
@@ -452,12 +462,14 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       // Lost about last frame's level: the full search now, not `full_search_every` frames later,
       // over the levels not grown yet (those gave regions that were refused or leaked).
       if (!best) {
+        ++res.full_searches;
         std::vector<int> rest;
         for (int li : all)
           if (std::find(tried.begin(), tried.end(), li) == tried.end()) rest.push_back(li);
         tryLevels(rest, false);
       }
     } else if (!best) {
+      ++res.full_searches;
       tryLevels(all, false);
     }
     // The region leaked or split at every level: search the shaft's sides from the seed directly
@@ -495,6 +507,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       // (a seed that only had its strip searched has had no full search: due at once next time)
       remember({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
                 strip_run ? 0 : age + elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
+      memory_now.back().fails = mem && !mem->accepted && !in_refused ? mem->fails + 1 : 1;
+      memory_now.back().area = smallest ? smallest->area : 0;
     }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
     if (!keep) continue;
@@ -551,7 +565,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   // robotic Dataset 1, about one seed per frame) keeps its memory while a full or strip search
   // of it would not be due yet: when the run is back it is not searched in full as a new seed.
   for (Memory const& m : memory_) {
-    if (m.accepted || (m.age + elapsed >= params_.full_search_every && stripSearchDue(&m, m.width, elapsed))) continue;
+    if (m.accepted || (fullSearchDue(m, m.width, elapsed) && stripSearchDue(&m, m.width, elapsed))) continue;
     bool const seen = std::any_of(memory_now.begin(), memory_now.end(), [&](Memory const& n) {
       return std::abs(n.entry.x - m.entry.x) + std::abs(n.entry.y - m.entry.y) <= params_.level_memory_px;
     });
@@ -698,6 +712,20 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
 // Whether a seed's border run is now of another width than its memory's (by more than a quarter):
 // something entered or left there.
 bool InstrumentSegmenter::runChanged(Memory const& m, int width) { return std::abs(width - m.width) * 4 > std::max(width, m.width); }
+
+// A refused seed's full search (growth at every level): every full_search_every frames, and
+// less and less often while it keeps giving no shaft (the interval doubles per failure up to
+// full_search_max_every frames), unless its run changed width (or its region its area:
+// process()). A memory kept over a frame without its run (carried) holds only for a run of its
+// width.
+bool InstrumentSegmenter::fullSearchDue(Memory const& m, int width, int elapsed) const {
+  int const age = m.age + elapsed;
+  if (runChanged(m, width) && (m.carried || age >= params_.full_search_every)) return true;
+  int const max_every = std::max(params_.full_search_every, params_.full_search_max_every);
+  int every = params_.full_search_every;
+  for (int k = 1; k < m.fails && every < max_every; ++k) every *= 2;
+  return age >= std::min(every, max_every);
+}
 
 // The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
 // frame) runs at its full searches, but the interval doubles per failure up to

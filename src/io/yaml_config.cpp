@@ -117,6 +117,8 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/level_memory_px", i(S.level_memory_px)},
       {"segmentation/full_search_every", i(S.full_search_every)},
       {"segmentation/strip_search_max_every", i(S.strip_search_max_every)},
+      {"segmentation/full_search_max_every", i(S.full_search_max_every)},
+      {"segmentation/refused_area_change", d(S.refused_area_change)},
       {"segmentation/resought_min_entry_sine", d(S.resought_min_entry_sine)},
       {"segmentation/resought_min_tip_depth_px", d(S.resought_min_tip_depth_px)},
       {"segmentation/resought_max_widening", d(S.resought_max_widening)},
@@ -177,6 +179,8 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(S.level_memory_px >= 0, "segmentation/level_memory_px", ">= 0");
   need(S.full_search_every >= 1, "segmentation/full_search_every", ">= 1");
   need(S.strip_search_max_every >= 1, "segmentation/strip_search_max_every", ">= 1");
+  need(S.full_search_max_every >= 1, "segmentation/full_search_max_every", ">= 1");
+  need(S.refused_area_change >= 0.0 && S.refused_area_change <= 1.0, "segmentation/refused_area_change", "in [0, 1]");
   need(S.resought_min_entry_sine >= 0.0 && S.resought_min_entry_sine <= 1.0, "segmentation/resought_min_entry_sine", "in [0, 1]");
   need(S.resought_min_tip_depth_px >= 0.0, "segmentation/resought_min_tip_depth_px", ">= 0");
   need(S.resought_max_widening >= 1.0, "segmentation/resought_max_widening", ">= 1");

@@ -596,6 +596,36 @@ TEST(Segmentation, ARefusedSeedMissingForAFrameKeepsItsMemory) {
   EXPECT_EQ(shaft.contours.size(), 1u);
 }
 
+// A refused seed that keeps giving no shaft is searched in full less and less often: every
+// full_search_every (5) frames, then the interval doubles per failed search up to
+// full_search_max_every. Its region, grown again at its level to claim it, must keep its area:
+// a blob that grows (its border run unchanged) is searched in full at once.
+TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
+  auto blob = [](int half_length) {
+    cv::Mat im(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
+    cv::ellipse(im, {0, 240}, {half_length, 70}, 0.0, 0.0, 360.0, cv::Scalar(100, 104, 123), -1, cv::LINE_AA);
+    return im;
+  };
+  auto searchedAt = [&](SegmentationParams const& p, int frames, int grown_from = -1) {
+    InstrumentSegmenter seg(p);
+    std::vector<int> at;
+    for (int k = 0; k < frames; ++k) {
+      auto const r = seg.process(blob(k >= grown_from && grown_from >= 0 ? 180 : 120));
+      EXPECT_TRUE(r.contours.empty());
+      if (r.full_searches > 0) at.push_back(k);
+    }
+    return at;
+  };
+  SegmentationParams every5;
+  every5.full_search_max_every = 5;
+  EXPECT_EQ(searchedAt(every5, 40), (std::vector<int>{0, 5, 10, 15, 20, 25, 30, 35}));
+  SegmentationParams const backing_off;  // full_search_max_every 20
+  EXPECT_EQ(searchedAt(backing_off, 40), (std::vector<int>{0, 5, 15, 35}));
+  // Grown inward by half at frame 22 (its run along the border unchanged): searched at once, and
+  // refused again, it backs off further.
+  EXPECT_EQ(searchedAt(backing_off, 45, 22), (std::vector<int>{0, 5, 15, 22, 42}));
+}
+
 // The hard rendered scene through the pipeline, frames 200-283: in frame 283 the left
 // instrument's jaws touch the right shaft's lower side. The right shaft's region seen again from
 // its entry (the region refused for another seed) has its lower side re-sought, and one

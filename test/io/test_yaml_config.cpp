@@ -56,6 +56,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                           "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  strip_full_res_outside_quantile: 1.5\n",
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
+                          "segmentation:\n  full_search_max_every: 0\n", "segmentation:\n  refused_area_change: 1.5\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
                           "insertion_points:\n  max_points: -1\n"}) {
     PipelineParams q;
@@ -90,6 +91,8 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.level_memory_px, defaults.segmentation.level_memory_px);
   EXPECT_EQ(shipped.segmentation.full_search_every, defaults.segmentation.full_search_every);
   EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
+  EXPECT_EQ(shipped.segmentation.full_search_max_every, defaults.segmentation.full_search_max_every);
+  EXPECT_EQ(shipped.segmentation.refused_area_change, defaults.segmentation.refused_area_change);
   EXPECT_EQ(shipped.segmentation.resought_min_entry_sine, defaults.segmentation.resought_min_entry_sine);
   EXPECT_EQ(shipped.segmentation.resought_min_tip_depth_px, defaults.segmentation.resought_min_tip_depth_px);
   EXPECT_EQ(shipped.segmentation.resought_max_widening, defaults.segmentation.resought_max_widening);
