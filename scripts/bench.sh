@@ -9,7 +9,7 @@ bash scripts/setup.sh
 B=build/devel/lib/endo_guidance
 "$B/endo_guidance_bench_pipeline" --benchmark_min_time=0.3 "$@"
 echo
-echo "The paired pipeline ratio, five repetitions (aggregates: median, mean, stddev, cv):"
-"$B/endo_guidance_bench_pipeline" --benchmark_filter='PipelinePairedWithHSV|PipelineTrackingPairedWithHSV' \
+echo "The paired pipeline ratios (rendered and, with the shared data, real frames), five repetitions (aggregates: median, mean, stddev, cv):"
+"$B/endo_guidance_bench_pipeline" --benchmark_filter='PipelinePairedWithHSV|PipelineTrackingPairedWithHSV|RealVideoPairedWithHSV|RealStillsSegmentationPairedWithHSV' \
   --benchmark_min_time=1 --benchmark_repetitions=5 --benchmark_report_aggregates_only=true "$@" | sed -n '/^Ratio/,$p'
 "$B/endo_guidance_bench" --benchmark_min_time=0.2 "$@"
