@@ -173,10 +173,13 @@ InsertionPointEstimate intersectAxesRobust(std::vector<PluckerLine> const& axes,
     double const t1 = (b * d2.dot(w0) - d1.dot(w0)) / den;
     double const t2 = (d2.dot(w0) - b * d1.dot(w0)) / den;
     Eigen::Vector3d const x = 0.5 * ((p1 + t1 * d1) + (p2 + t2 * d2));
+    int below = 0;  // residuals under the best order statistic so far
     for (int m = 0; m < n; ++m) {
       double const r = axes[m].distanceTo(x);
       r2[m] = r * r;
+      below += r2[m] < best;
     }
+    if (below <= k) continue;  // its k-th smallest is not below the best: no need to find it
     std::nth_element(r2.begin(), r2.begin() + k, r2.end());
     if (r2[k] < best) {
       best = r2[k];
