@@ -824,8 +824,6 @@ void setFarEnd(SideFit& fit) {
       }
 }
 
-namespace {
-
 // What every side search of a region shares (fitSides()): which boundary points lie on the
 // view's border, whether the region meets it more than once, the two chains that leave the
 // entry and each side followed from the entry.
@@ -835,6 +833,8 @@ struct SideChains {
   std::vector<Eigen::Vector2d> chain[2];
   std::optional<FollowedSide> fwd[2];
 };
+
+namespace {
 
 SideChains sideChains(Region const& region, FieldOfView const& fov, ContourLinesParams const& p) {
   SideChains sc;
@@ -1019,15 +1019,22 @@ std::optional<SideFit> tooShortForSides(Region const& region, ContourLinesParams
 
 SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p, SideSearch search) {
   if (auto f = tooShortForSides(region, p)) return *f;
-  return fitSidesFrom(sideChains(region, fov, p), region, fov, scale, p, search);
+  auto sc = std::make_shared<SideChains const>(sideChains(region, fov, p));
+  SideFit fit = fitSidesFrom(*sc, region, fov, scale, p, search);
+  fit.chains = std::move(sc);
+  return fit;
 }
 
 std::vector<SideFit> fitSidesEach(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& p,
-                                  std::vector<SideSearch> const& searches) {
+                                  std::vector<SideSearch> const& searches, SideFit const* fitted) {
   if (auto f = tooShortForSides(region, p)) return std::vector<SideFit>(searches.size(), *f);
-  SideChains const sc = sideChains(region, fov, p);
+  std::shared_ptr<SideChains const> sc = fitted ? fitted->chains : nullptr;
+  if (!sc) sc = std::make_shared<SideChains const>(sideChains(region, fov, p));
   std::vector<SideFit> out;
-  for (SideSearch const s : searches) out.push_back(fitSidesFrom(sc, region, fov, scale, p, s));
+  for (SideSearch const s : searches) {
+    out.push_back(fitSidesFrom(*sc, region, fov, scale, p, s));
+    out.back().chains = sc;
+  }
   return out;
 }
 

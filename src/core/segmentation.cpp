@@ -339,10 +339,11 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     std::vector<Candidate> resought;
     // The sides of `region` sought again (its pair from the entry had no edges or diverged, or
     // none was found in a region another seed grew): re-sought candidates.
-    auto reseek = [&](Region const& region, int level) {
+    // `fitted`: the region's fitSides() (its chains are reused).
+    auto reseek = [&](Region const& region, int level, SideFit const& fitted) {
       if (params_.contours.min_parallel_side_ratio <= 0.0) return;
       for (SideFit& again : fitSidesEach(region, view, scale, params_.contours,
-                                         {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair})) {
+                                         {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}, &fitted)) {
         if (again.rejection != ContourRejection::kNone) continue;
         double const score = scoreSides(again, bgr, params_.contours);
         if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
@@ -386,7 +387,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           return;
         }
         why = f.rejection;
-        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level);
+        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level, cd.sides);
       }
     };
     auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
@@ -413,7 +414,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
           // level merged with it there (grey tissue, a leak); the shaft's own side is the
           // stretch of that chain parallel to the other (in-vivo OP1/img_24 found; OP1/img_08
           // and img_16 found so from an earlier seed, with better lines: 2.31 -> 2.15 px).
-          if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li);
+          if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li, sf);
           continue;
         }
         // (not deferred for a shaft that was found so in the last frame: its level is tried first)
@@ -442,7 +443,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
         double const score = scoreSides(sf, bgr, params_.contours);
         int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()),
                                    static_cast<int>(T.size()) - 1);
-        if (score < 0.0 && !sf.parallel) reseek(r, level);  // no pair with edges from this entry
+        if (score < 0.0 && !sf.parallel) reseek(r, level, sf);  // no pair with edges from this entry
         if (score >= 0.0) {
           Candidate cd{std::move(r), std::move(sf), score, level, true};
           if (cd.sides.parallel) {

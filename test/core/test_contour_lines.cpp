@@ -684,7 +684,8 @@ TEST(ContourLines, StraightStretchSearchIsTheSameInEveryPath) {
 
 // fitSidesEach(): the searches on one region, sharing its chains and the sides followed from the
 // entry, give each what fitSides() gives alone (the merged shafts above, every search, in two
-// orders; a region too small for two sides is refused for each search).
+// orders; a region too small for two sides is refused for each search); also when the shared
+// part is taken from a fitSides() of the region (as a re-seek after the first search does).
 TEST(ContourLines, SidesSoughtEachWayAtOnceAreTheSameAsOneByOne) {
   std::vector<SideSearch> const all{SideSearch::kFromEntry, SideSearch::kParallelFirst, SideSearch::kParallelSecond,
                                     SideSearch::kStretchPair};
@@ -695,27 +696,35 @@ TEST(ContourLines, SidesSoughtEachWayAtOnceAreTheSameAsOneByOne) {
     for (bool reversed : {false, true}) {
       std::vector<SideSearch> order = all;
       if (reversed) std::reverse(order.begin(), order.end());
-      std::vector<SideFit> const each = fitSidesEach(*m.region, m.fov, 2, p, order);
-      ASSERT_EQ(each.size(), order.size());
-      int found = 0;
-      for (std::size_t i = 0; i < order.size(); ++i) {
-        SideFit const one = fitSides(*m.region, m.fov, 2, p, order[i]);
-        ASSERT_EQ(each[i].rejection, one.rejection) << i;
-        EXPECT_EQ(each[i].parallel, one.parallel) << i;
-        EXPECT_EQ(each[i].merged, one.merged) << i;
-        for (int k = 0; k < 2; ++k) {
-          EXPECT_EQ(each[i].lines[k], one.lines[k]) << i;
-          EXPECT_EQ(each[i].points[k], one.points[k]) << i;
+      SideFit const first = fitSides(*m.region, m.fov, 2, p);
+      ASSERT_TRUE(first.chains);
+      for (SideFit const* fitted : {static_cast<SideFit const*>(nullptr), &first}) {
+        std::vector<SideFit> const each = fitSidesEach(*m.region, m.fov, 2, p, order, fitted);
+        ASSERT_EQ(each.size(), order.size());
+        int found = 0;
+        for (std::size_t i = 0; i < order.size(); ++i) {
+          SideFit const one = fitSides(*m.region, m.fov, 2, p, order[i]);
+          ASSERT_EQ(each[i].rejection, one.rejection) << i;
+          EXPECT_EQ(each[i].parallel, one.parallel) << i;
+          EXPECT_EQ(each[i].merged, one.merged) << i;
+          for (int k = 0; k < 2; ++k) {
+            EXPECT_EQ(each[i].lines[k], one.lines[k]) << i;
+            EXPECT_EQ(each[i].points[k], one.points[k]) << i;
+          }
+          if (fitted) EXPECT_EQ(each[i].chains, first.chains) << i;  // taken, not computed again
+          found += one.rejection == ContourRejection::kNone;
         }
-        found += one.rejection == ContourRejection::kNone;
+        EXPECT_GE(found, 1);
       }
-      EXPECT_GE(found, 1);
     }
   }
   Region tiny;
   tiny.boundary = {{0, 0}, {1, 0}, {1, 1}};
   FieldOfView fov;
   for (SideFit const& f : fitSidesEach(tiny, fov, 1, p, all)) EXPECT_EQ(f.rejection, ContourRejection::kTooFewPoints);
+  SideFit const refused = fitSides(tiny, fov, 1, p);  // (refused before anything is computed: no chains)
+  EXPECT_FALSE(refused.chains);
+  for (SideFit const& f : fitSidesEach(tiny, fov, 1, p, all, &refused)) EXPECT_EQ(f.rejection, ContourRejection::kTooFewPoints);
 }
 
 TEST(ContourLines, ASideSoughtAgainBeyondABlobThatReachesTheBorder) {

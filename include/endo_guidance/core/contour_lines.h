@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -171,6 +172,7 @@ struct ProfileEdges {
 };
 /// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
 /// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
+struct SideChains;  // what every side search of a region shares (contour_lines.cpp)
 struct SideFit {
   std::array<Eigen::Vector3d, 2> lines{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   std::array<std::vector<Eigen::Vector2d>, 2> points;
@@ -182,6 +184,9 @@ struct SideFit {
   /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
   /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
+  /// Set by fitSides(): the part of the search that the other searches of the same region share
+  /// (fitSidesEach() reuses it).
+  std::shared_ptr<SideChains const> chains;
 };
 /// How fitSides() seeks the two sides. kFromEntry: each followed from the entry; a side that is
 /// not straight from there (a grey blob merged with the shaft near its entry: gauze) is sought as
@@ -199,8 +204,10 @@ SideFit fitSides(Region const& region, FieldOfView const& fov, int scale, Contou
 /// fitSides() with each of `searches` on one region (a fit per search, in order), the part they
 /// share done once: the boundary's points on the view's border, the two chains from the entry
 /// and the sides followed from it (the costliest part of a search: LMedS along each chain).
+/// `fitted`: a fitSides() result of the same region, view and parameters, whose shared part is
+/// taken instead of computed again (a region re-sought after its first search failed).
 std::vector<SideFit> fitSidesEach(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params,
-                                  std::vector<SideSearch> const& searches);
+                                  std::vector<SideSearch> const& searches, SideFit const* fitted = nullptr);
 /// Sets fit.far to the side point farthest from fit.entry.
 void setFarEnd(SideFit& fit);
 /// Cheap quality of a side pair for choosing between candidate regions: one wide, sparse edge
