@@ -610,7 +610,7 @@ TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
     InstrumentSegmenter seg(p);
     std::vector<int> at;
     for (int k = 0; k < frames; ++k) {
-      auto const r = seg.process(blob(k >= grown_from && grown_from >= 0 ? 180 : 120));
+      auto const r = seg.process(blob(k >= grown_from && grown_from >= 0 ? 240 : 120));
       EXPECT_TRUE(r.contours.empty());
       if (r.full_searches > 0) at.push_back(k);
     }
@@ -621,7 +621,7 @@ TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
   EXPECT_EQ(searchedAt(every5, 40), (std::vector<int>{0, 5, 10, 15, 20, 25, 30, 35}));
   SegmentationParams const backing_off;  // full_search_max_every 20
   EXPECT_EQ(searchedAt(backing_off, 40), (std::vector<int>{0, 5, 15, 35}));
-  // Grown inward by half at frame 22 (its run along the border unchanged): searched at once, and
+  // Twice as long inward from frame 22 (its run along the border unchanged): searched at once, and
   // refused again, it backs off further.
   EXPECT_EQ(searchedAt(backing_off, 45, 22), (std::vector<int>{0, 5, 15, 22, 42}));
 }

@@ -170,9 +170,9 @@ struct ProfileEdges {
   double t0 = 0.0, step = 0.0;
   std::vector<std::optional<Eigen::Vector2d>> edges;
 };
+struct SideChains;  // what every side search of a region shares (contour_lines.cpp)
 /// The first, cheap half of fitApparentContour(): two-class split and LMedS per side (no image
 /// access). Lines and inlier points in full-resolution pixels, lines oriented toward the shaft.
-struct SideChains;  // what every side search of a region shares (contour_lines.cpp)
 struct SideFit {
   std::array<Eigen::Vector3d, 2> lines{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   std::array<std::vector<Eigen::Vector2d>, 2> points;
