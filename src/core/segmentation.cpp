@@ -567,9 +567,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   // of it would not be due yet: when the run is back it is not searched in full as a new seed.
   for (Memory const& m : memory_) {
     if (m.accepted || (fullSearchDue(m, m.width, elapsed) && stripSearchDue(&m, m.width, elapsed))) continue;
-    bool const seen = std::any_of(memory_now.begin(), memory_now.end(), [&](Memory const& n) {
-      return std::abs(n.entry.x - m.entry.x) + std::abs(n.entry.y - m.entry.y) <= params_.level_memory_px;
-    });
+    bool const seen = std::any_of(memory_now.begin(), memory_now.end(),
+                                  [&](Memory const& n) { return entryDistance(n.entry, m.entry) <= params_.level_memory_px; });
     if (seen) continue;
     Memory c = m;
     c.carried = true;
@@ -701,7 +700,7 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
   Memory const* best = nullptr;
   int best_d = 0;
   for (auto const& m : memory_) {
-    int const d = std::abs(m.entry.x - seed.position.x) + std::abs(m.entry.y - seed.position.y);
+    int const d = entryDistance(m.entry, seed.position);
     if (d <= params_.level_memory_px && (!best || d < best_d)) {
       best = &m;
       best_d = d;
@@ -709,6 +708,9 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
   }
   return best;
 }
+
+// How far apart two seeds' entries are for the seed memory (processing px, city block).
+int InstrumentSegmenter::entryDistance(cv::Point a, cv::Point b) { return std::abs(a.x - b.x) + std::abs(a.y - b.y); }
 
 // Whether a seed's border run is now of another width than its memory's (by more than a quarter):
 // something entered or left there.

@@ -136,6 +136,7 @@ class InstrumentSegmenter {
     int area = 0;           // of the region kept at its last full search (processing px)
   };
   Memory const* remembered(Seed const& seed) const;
+  static int entryDistance(cv::Point a, cv::Point b);
   static bool runChanged(Memory const& m, int width);
   bool fullSearchDue(Memory const& m, int width, int elapsed) const;  // width: of the seed's run now
   bool stripSearchDue(Memory const* m, int width, int elapsed) const;  // width: of the seed's run now
