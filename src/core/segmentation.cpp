@@ -712,6 +712,17 @@ InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& s
 // How far apart two seeds' entries are for the seed memory (processing px, city block).
 int InstrumentSegmenter::entryDistance(cv::Point a, cv::Point b) { return std::abs(a.x - b.x) + std::abs(a.y - b.y); }
 
+// Whether a search that gave nothing `fails` times in a row is due, `age` frames after the last:
+// every `every` frames, the interval doubling per failure after the first, up to `max_every`.
+namespace {
+bool backedOffDue(int age, int fails, int every, int max_every) {
+  every = std::max(1, every);
+  max_every = std::max(every, max_every);
+  for (int k = 1; k < fails && every < max_every; ++k) every *= 2;
+  return age >= std::min(every, max_every);
+}
+}  // namespace
+
 // Whether a seed's border run is now of another width than its memory's (by more than a quarter):
 // something entered or left there.
 bool InstrumentSegmenter::runChanged(Memory const& m, int width) { return std::abs(width - m.width) * 4 > std::max(width, m.width); }
@@ -724,10 +735,7 @@ bool InstrumentSegmenter::runChanged(Memory const& m, int width) { return std::a
 bool InstrumentSegmenter::fullSearchDue(Memory const& m, int width, int elapsed) const {
   int const age = m.age + elapsed;
   if (runChanged(m, width) && (m.carried || age >= params_.full_search_every)) return true;
-  int const max_every = std::max(params_.full_search_every, params_.full_search_max_every);
-  int every = params_.full_search_every;
-  for (int k = 1; k < m.fails && every < max_every; ++k) every *= 2;
-  return age >= std::min(every, max_every);
+  return backedOffDue(age, m.fails, params_.full_search_every, params_.full_search_max_every);
 }
 
 // The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
@@ -736,9 +744,7 @@ bool InstrumentSegmenter::fullSearchDue(Memory const& m, int width, int elapsed)
 bool InstrumentSegmenter::stripSearchDue(Memory const* m, int width, int elapsed) const {
   if (!m || m->accepted || m->strip_fails == 0) return true;
   if (runChanged(*m, width)) return true;
-  int every = std::max(1, params_.full_search_every);
-  for (int k = 1; k < m->strip_fails && every < params_.strip_search_max_every; ++k) every *= 2;
-  return m->strip_age + elapsed >= std::min(every, std::max(params_.full_search_every, params_.strip_search_max_every));
+  return backedOffDue(m->strip_age + elapsed, m->strip_fails, params_.full_search_every, params_.strip_search_max_every);
 }
 
 bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> const& found) {
