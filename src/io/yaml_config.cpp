@@ -148,6 +148,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"insertion_points/point_motion_sigma", d(T.tracker.point_motion_sigma)},
       {"insertion_points/gate_max", d(T.tracker.gate_max)},
       {"insertion_points/correlation_views", z(T.tracker.correlation_views)},
+      {"insertion_points/motion_correlation_views", z(T.tracker.motion_correlation_views)},
       {"tracking/max_angle_deg", d(p.tracking.max_angle_deg)},
       {"tracking/max_distance_px", d(p.tracking.max_distance_px)},
   };

@@ -290,6 +290,52 @@ TEST(InsertionPointTracker, LocatedOnlyOnceThePositionIsKnown) {
   EXPECT_LT((t.estimate().position - kTrocar).norm(), t.options().max_sigma);
 }
 
+// Precise axes of a breathing trocar (2 mm, one cycle per 100 frames) seen over a fan that
+// widens slowly: the trocar's motion across the axes is shared by every axis of a breathing
+// cycle, and moves the point along the narrow fan by that motion over the fan's spread. A point
+// must not be located (published for the servo to pivot about) that far off: with blocks of 10
+// axes taken as independent, it was, 18.5 mm off at 4.8 mm claimed (rendered hard scene without
+// JPEG). Every located estimate lies within 3 of its claimed longest sigmas of the true mean.
+TEST(InsertionPointTracker, ABreathingTrocarIsNotLocatedBeforeItsMotionAverages) {
+  SyntheticSceneOptions so;
+  so.line_noise_px = 0.02;
+  so.breathing_amplitude = 0.002;
+  auto run = [&](std::size_t motion_views, int instrument, double* worst_ratio, double* worst_mm, int* first) {
+    SyntheticScene scene(defaultInstruments(), so);
+    InsertionPointTrackerOptions o;
+    o.motion_correlation_views = motion_views;
+    InsertionPointTracker t(o);
+    *worst_ratio = *worst_mm = 0.0;
+    *first = -1;
+    for (int k = 0; k < 300; ++k)
+      for (auto const& view : scene.frame(k)) {
+        if (view.instrument != instrument) continue;
+        auto const r = estimateCylinderPose(so.K, view.radius, view.measured);
+        if (!r.ok()) continue;
+        t.update(r.pose.axis, r.pose.covariance);
+        if (!t.located()) continue;
+        if (*first < 0) *first = k;
+        double const e = (t.estimate().position - scene.meanTrocar(instrument)).norm();
+        *worst_mm = std::max(*worst_mm, 1e3 * e);
+        *worst_ratio = std::max(*worst_ratio, e / t.estimate().longestSigma());
+      }
+  };
+  double worst_without = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    double ratio = 0.0, mm = 0.0, ratio0 = 0.0, mm0 = 0.0;
+    int first = -1, first0 = -1;
+    run(InsertionPointTrackerOptions{}.motion_correlation_views, i, &ratio, &mm, &first);
+    run(0, i, &ratio0, &mm0, &first0);
+    std::printf("[ breathing trocar %d, precise axes ] located from frame %d, at most %.2f mm / %.1f claimed sigmas off "
+                "(motion taken as independent per 10 axes: from frame %d, %.2f mm / %.1f sigmas)\n",
+                i, first, mm, ratio, first0, mm0, ratio0);
+    EXPECT_GE(first, 0) << "trocar " << i << " never located in 300 frames";
+    EXPECT_LT(ratio, 3.0) << "trocar " << i;
+    worst_without = std::max(worst_without, ratio0);
+  }
+  EXPECT_GT(worst_without, 3.0);  // the case is one the blocks of 10 axes alone fail
+}
+
 TEST(InsertionPointTracker, AnUncertainAxisDoesNotWidenTheGate) {
   // Exact axes through the point: its spread is nil, and the gate is the default one. An axis
   // whose own covariance is wide at the point (a short shaft) does not widen it to gate_max: a

@@ -81,6 +81,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.sigma_delta, defaults.segmentation.sigma_delta);
   EXPECT_EQ(shipped.insertion_points.tracker.memory_views, defaults.insertion_points.tracker.memory_views);
   EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
+  EXPECT_EQ(shipped.insertion_points.tracker.motion_correlation_views, defaults.insertion_points.tracker.motion_correlation_views);
   EXPECT_EQ(shipped.pose.min_distance, defaults.pose.min_distance);
   EXPECT_EQ(shipped.segmentation.seeds.relative_threshold, defaults.segmentation.seeds.relative_threshold);
   EXPECT_EQ(shipped.segmentation.seeds.run_floor, defaults.segmentation.seeds.run_floor);

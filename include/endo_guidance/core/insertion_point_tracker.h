@@ -37,6 +37,11 @@ struct InsertionPointTrackerOptions {
                                      ///< errors (compression, breathing), so the model covariance, which
                                      ///< takes them as independent, was 3-7x too small in the hard
                                      ///< rendered scene (Mahalanobis distance of the true mean, median 2.8-4.4)
+  std::size_t motion_correlation_views = 100; ///< axes over which the trocar's own motion is shared (a
+                                     ///< breathing cycle: 4 s at 25 Hz, one axis per frame; 0: only the
+                                     ///< blocks above): the covariance along the mean axis is at least
+                                     ///< min(rms, point_motion_sigma) / spread per independent cycle. A slow
+                                     ///< sweep of precise axes about a breathing trocar was located 12-19 mm off
   RobustIntersectOptions robust;
 };
 
@@ -61,7 +66,9 @@ struct InsertionPointTrackerOptions {
 /// \f$ \Sigma_c = \tfrac{B}{B-1} S^{-1} (\sum_b g_b g_b^\top) S^{-1} \f$, the model covariance scaled by
 /// the largest generalised eigenvalue of \f$ \Sigma_c \f$ over it when above 1, keeping its shape),
 /// and at least \f$ \mathrm{rms}^2 / (\mathrm{spread}^2\, G) \f$ along the mean axis, G the number of
-/// independent groups of correlation_views axes (the along-axis error of a shared error).
+/// independent groups of correlation_views axes (the along-axis error of a shared error), and at
+/// least \f$ \min(\mathrm{rms}, \sigma_b)^2 / (\mathrm{spread}^2\, G_b) \f$, G_b the number of
+/// motion_correlation_views axes (breathing cycles) seen: the trocar's own motion is shared longer.
 /// Memory is O(1) in the axes, plus a
 /// bounded window of recent axes. Axes beyond the gate are rejected (not accumulated); a run of
 /// rejections re-initialises the estimate robustly (LMedS, Eq. (3)) from the most recent axes.
