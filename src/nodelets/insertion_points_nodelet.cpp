@@ -10,6 +10,7 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -86,6 +87,7 @@ void InsertionPointsNodelet::onInit() {
   c.min_conditioning = params_.insertion_points.tracker.min_conditioning;
   c.max_sigma = params_.insertion_points.tracker.max_sigma;
   c.point_motion_sigma = params_.insertion_points.tracker.point_motion_sigma;
+  c.motion_correlation_views = static_cast<int>(std::min<std::size_t>(params_.insertion_points.tracker.motion_correlation_views, 2000));
   c.gate_max = params_.insertion_points.tracker.gate_max;
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](InsertionPointsConfig& cfg, uint32_t level) { configCb(cfg, level); });
@@ -106,6 +108,7 @@ void InsertionPointsNodelet::configCb(InsertionPointsConfig& c, uint32_t) {
   params_.insertion_points.tracker.min_conditioning = c.min_conditioning;
   params_.insertion_points.tracker.max_sigma = c.max_sigma;
   params_.insertion_points.tracker.point_motion_sigma = c.point_motion_sigma;
+  params_.insertion_points.tracker.motion_correlation_views = static_cast<std::size_t>(std::max(0, c.motion_correlation_views));
   params_.insertion_points.tracker.gate_max = c.gate_max;
   if (set_) set_->setOptions(params_.insertion_points);
 }

@@ -419,6 +419,26 @@ TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
   EXPECT_GE(contours_.get()->contours.size(), 1u);
 }
 
+// The breathing cycle (axes over which a trocar's own motion is shared) is tunable at run time,
+// as the ventilator's rate is per patient: the server takes it and reports it back.
+TEST_F(Graph, DynamicReconfigureTakesTheBreathingCycle) {
+  ASSERT_TRUE(ros::service::waitForService("endoscope/insertion_points/set_parameters", 5000));
+  auto set = [](int views) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::IntParameter p;
+    p.name = "motion_correlation_views";
+    p.value = views;
+    srv.request.config.ints.push_back(p);
+    if (!callService("endoscope/insertion_points/set_parameters", srv)) return -1;
+    for (auto const& q : srv.response.config.ints)
+      if (q.name == "motion_correlation_views") return q.value;
+    return -1;
+  };
+  EXPECT_EQ(set(150), 150);
+  EXPECT_EQ(set(0), 0);
+  EXPECT_EQ(set(100), 100);
+}
+
 // Services: freeze keeps a trocar where it is; reset forgets them.
 TEST_F(Graph, ResetAndFreezeServices) {
   SyntheticScene scene(defaultInstruments(), so_);
