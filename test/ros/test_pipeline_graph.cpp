@@ -395,19 +395,28 @@ TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {
 }
 
 
+namespace {
+// Sets an int parameter of `node`'s dynamic_reconfigure server; the value it reports back (-1:
+// the call failed or the parameter is not in its config).
+int setIntParameter(std::string const& node, std::string const& name, int value) {
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::IntParameter p;
+  p.name = name;
+  p.value = value;
+  srv.request.config.ints.push_back(p);
+  if (!callService(node + "/set_parameters", srv)) return -1;
+  for (auto const& q : srv.response.config.ints)
+    if (q.name == name) return q.value;
+  return -1;
+}
+}  // namespace
+
 // Runtime tuning: a seed threshold of 0 finds no shaft; restored, the shafts come back.
 TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
   SyntheticScene scene(defaultInstruments(), so_);
   SceneRenderer renderer(so_.width, so_.height);
   cv::Mat const good = renderer.render(scene.frame(30), 30);
-  auto set = [](int threshold) {
-    dynamic_reconfigure::Reconfigure srv;
-    dynamic_reconfigure::IntParameter p;
-    p.name = "seed_threshold";
-    p.value = threshold;
-    srv.request.config.ints.push_back(p);
-    return callService("endoscope/segmentation/set_parameters", srv) && srv.response.config.ints.size() > 0;
-  };
+  auto set = [](int threshold) { return setIntParameter("endoscope/segmentation", "seed_threshold", threshold) == threshold; };
   ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
   ASSERT_TRUE(publish(good, ros::Time(2000.0)));
   ASSERT_GE(contours_.get()->contours.size(), 1u);
@@ -423,17 +432,7 @@ TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
 // as the ventilator's rate is per patient: the server takes it and reports it back.
 TEST_F(Graph, DynamicReconfigureTakesTheBreathingCycle) {
   ASSERT_TRUE(ros::service::waitForService("endoscope/insertion_points/set_parameters", 5000));
-  auto set = [](int views) {
-    dynamic_reconfigure::Reconfigure srv;
-    dynamic_reconfigure::IntParameter p;
-    p.name = "motion_correlation_views";
-    p.value = views;
-    srv.request.config.ints.push_back(p);
-    if (!callService("endoscope/insertion_points/set_parameters", srv)) return -1;
-    for (auto const& q : srv.response.config.ints)
-      if (q.name == "motion_correlation_views") return q.value;
-    return -1;
-  };
+  auto set = [](int views) { return setIntParameter("endoscope/insertion_points", "motion_correlation_views", views); };
   EXPECT_EQ(set(150), 150);
   EXPECT_EQ(set(0), 0);
   EXPECT_EQ(set(100), 100);
