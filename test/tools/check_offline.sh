@@ -47,9 +47,10 @@ echo "not a png" > "$T/seq/frames/000050.png"
   --overlay "$T/ov" --quiet "$T/seq/frames" 2> "$T/err.txt"
 grep -q "frame 50 .*unreadable image -- skipped" "$T/err.txt"
 grep -q "frame 60 .*image size 320x240 differs from the camera's 640x480 -- skipped" "$T/err.txt"
-/usr/bin/python3 - "$T/out.jsonl" <<'PY'
-import json, math, sys
+/usr/bin/python3 - "$T/out.jsonl" "$T/seq/truth.yaml" <<'PY'
+import json, math, sys, yaml
 rows = [json.loads(l) for l in open(sys.argv[1])]
+truth = yaml.safe_load(open(sys.argv[2]))["trocars"]
 assert len(rows) == 120, len(rows)
 assert [r["frame"] for r in rows] == list(range(120))
 bad = [r for r in rows if "error" in r]
@@ -82,13 +83,19 @@ for r in good:
         assert math.dist(Pxd, m) < 0.003, (t, P)  # |P x d - m|: the point's distance to the axis
         assert t["chi2"] >= 0, t
 assert through > 10, through  # (the first point is located from about frame 100: breathing cycles must average)
+# A located point is one the servo pivots about: in every frame, within 4 mm of a true (mean)
+# trocar. (The scene breathes by 2 mm over a narrow sweep: before the breathing's share of the
+# covariance, one was located 18.5 mm off at frame 55 while claiming under 5 mm.)
+worst = max((min(math.dist(p["position"], t) for t in truth) for r in good for p in r["insertion_points"] if p["located"]), default=0)
+assert worst < 0.004, worst
 assert len(rows[-1]["insertion_points"]) == 3, rows[-1]["insertion_points"]
 for p in rows[-1]["insertion_points"]:
     C = p["covariance"]  # row-major 3x3, m^2: symmetric, positive diagonal, a sigma of mm here
     assert len(C) == 9 and all(abs(C[3 * a + b] - C[3 * b + a]) <= 1e-9 * abs(C[0]) for a in range(3) for b in range(3)), C
     assert all(C[4 * a] > 0 for a in range(3)), C
     assert 1e-5 < math.sqrt(C[0] + C[4] + C[8]) < 0.02, C
-print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts,", through, "through a located insertion point")
+print("offline JSON ok:", len(rows), "frames,", sum(len(r["instruments"]) for r in good), "shafts,", through,
+      "through a located insertion point, located points at most %.2f mm off" % (1e3 * worst))
 PY
 test "$(ls "$T/ov" | wc -l)" -eq 118
 # A bag (sensor_msgs/Image + camera_info beside it, stamps since the epoch): its camera_info is
