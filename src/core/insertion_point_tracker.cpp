@@ -23,6 +23,8 @@ void InsertionPointTracker::clearSums() {
   blocks_w_ = blocks_w2_ = 0.0;
   open_M_.setZero();
   open_n_ = 0;
+  span_ = 0.0;
+  last_stamp_ = std::numeric_limits<double>::quiet_NaN();
 }
 
 void InsertionPointTracker::reset() {
@@ -107,6 +109,13 @@ void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d con
   Bu_ = rho_ * Bu_ + Bk.transpose() * Bk;
   sw_ = rho_ * sw_ + 1.0;
   sw2_ = rho_ * rho_ * sw2_ + 1.0;
+  // The time since the last accepted axis (axes of one frame share their breathing phase; a
+  // pause counts as one cycle at most: the motion's phase is then independent, not averaged).
+  double dt = options_.assumed_axis_interval;
+  if (std::isfinite(o.stamp) && std::isfinite(last_stamp_) && o.stamp >= last_stamp_) dt = o.stamp - last_stamp_;
+  if (options_.breathing_period > 0.0) dt = std::min(dt, options_.breathing_period);
+  if (std::isfinite(o.stamp)) last_stamp_ = o.stamp;
+  span_ = rho_ * span_ + dt;
   ++accepted_;
   if (options_.correlation_views > 0) {
     blocks_T_ *= rho_ * rho_;
@@ -186,18 +195,20 @@ void InsertionPointTracker::solve() {
   // over the independent groups of correlation_views axes at best. Early on, the blocks above
   // cannot see errors shared by all of them (a slow sweep): hard rendered scene, a point 19.6 mm
   // off claimed 3.3 mm without this floor. The trocar's own motion (breathing, up to
-  // point_motion_sigma of the rms) is shared for longer: by the axes of a whole breathing cycle,
-  // motion_correlation_views of them (without it, the hard scene without JPEG had a point located
-  // 18.5 mm off while claiming 4.8 mm).
-  if (e.conditioning > 0.0 && (options_.correlation_views > 0 || options_.motion_correlation_views > 0)) {
-    auto sharedFloor2 = [&](double shared, std::size_t views_per_group) {
-      if (views_per_group == 0) return 0.0;
-      double const groups = std::max(1.0, n_eff / static_cast<double>(views_per_group));
-      return shared * shared / (e.conditioning * e.conditioning * groups);
-    };
-    double const floor2 = std::max(sharedFloor2(e.rms_distance, options_.correlation_views),
-                                   sharedFloor2(std::min(e.rms_distance, options_.point_motion_sigma),
-                                                options_.motion_correlation_views));
+  // point_motion_sigma of the rms) is shared for longer: by every axis of a breathing cycle, so
+  // it averages over the cycles the axes span (without it, the hard scene without JPEG had a
+  // point located 18.5 mm off while claiming 4.8 mm).
+  if (e.conditioning > 0.0) {
+    double const spread2 = e.conditioning * e.conditioning;
+    double floor2 = 0.0;
+    if (options_.correlation_views > 0)
+      floor2 = e.rms_distance * e.rms_distance /
+               (spread2 * std::max(1.0, n_eff / static_cast<double>(options_.correlation_views)));
+    if (options_.breathing_period > 0.0) {
+      double const cycles = std::max(1.0, n_eff * (span_ / sw_) / options_.breathing_period);
+      double const motion = std::min(e.rms_distance, options_.point_motion_sigma);
+      floor2 = std::max(floor2, motion * motion / (spread2 * cycles));
+    }
     Eigen::Vector3d const u = es.eigenvectors().col(0);  // the least constrained direction: the mean axis
     double const along = u.dot(e.covariance * u);
     if (along < floor2) e.covariance += (floor2 - along) * u * u.transpose();
@@ -231,18 +242,19 @@ bool InsertionPointTracker::initialiseFrom(std::vector<Observation> const& obs) 
   return estimate_.ok();
 }
 
-bool InsertionPointTracker::initialise(std::vector<PluckerLine> const& axes,
-                                       std::vector<AxisCovariance> const& covariances) {
+bool InsertionPointTracker::initialise(std::vector<PluckerLine> const& axes, std::vector<AxisCovariance> const& covariances,
+                                       std::vector<double> const& stamps) {
   std::vector<Observation> obs;
   for (std::size_t i = 0; i < axes.size(); ++i)
-    obs.push_back({axes[i], i < covariances.size() ? covariances[i] : AxisCovariance::Zero()});
+    obs.push_back({axes[i], i < covariances.size() ? covariances[i] : AxisCovariance::Zero(),
+                   i < stamps.size() ? stamps[i] : std::numeric_limits<double>::quiet_NaN()});
   return initialiseFrom(obs);
 }
 
-InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& axis, AxisCovariance const& cov) {
+InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& axis, AxisCovariance const& cov, double stamp) {
   if (!axis.direction().allFinite() || !axis.moment().allFinite() || !cov.allFinite()) return Update::kInvalid;
   if (frozen_) return Update::kFrozen;
-  window_.push_back({axis, cov});
+  window_.push_back({axis, cov, stamp});
   while (window_.size() > options_.window) window_.pop_front();
   if (!initialized_) {
     if (window_.size() < options_.min_views) return Update::kBuffered;
@@ -257,7 +269,7 @@ InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& a
                                                                                        : Update::kRejected;
   }
   consecutive_rejects_ = 0;
-  accumulate({axis, cov}, estimate_.position);
+  accumulate({axis, cov, stamp}, estimate_.position);
   solve();
   return Update::kAccepted;
 }
@@ -302,7 +314,7 @@ InsertionPointTracker* InsertionPointSet::find(int id) {
   return nullptr;
 }
 
-int InsertionPointSet::update(PluckerLine const& axis, AxisCovariance const& cov) {
+int InsertionPointSet::update(PluckerLine const& axis, AxisCovariance const& cov, double stamp) {
   if (!axis.direction().allFinite() || !axis.moment().allFinite() || !cov.allFinite()) return -1;
   ++fed_;
   prune();
@@ -310,13 +322,13 @@ int InsertionPointSet::update(PluckerLine const& axis, AxisCovariance const& cov
   if (id >= 0) {
     for (auto& p : points_)
       if (p.id == id) {
-        p.tracker.update(axis, cov);
+        p.tracker.update(axis, cov, stamp);
         p.last_update = fed_;
       }
     mergeDuplicates();
     return find(id) ? id : classify(axis, nullptr, cov);  // merged away: report the survivor
   }
-  pool_.emplace_back(axis, cov);
+  pool_.push_back({axis, cov, stamp});
   while (pool_.size() > options_.pool_size) pool_.pop_front();
   if (++since_discover_ >= options_.discover_every) {
     since_discover_ = 0;
@@ -329,7 +341,7 @@ void InsertionPointSet::discover() {
   if (options_.max_points > 0 && static_cast<int>(points_.size()) >= options_.max_points) return;
   if (pool_.size() < options_.discover_min_inliers) return;
   std::vector<PluckerLine> axes;
-  for (auto const& a : pool_) axes.push_back(a.first);
+  for (auto const& a : pool_) axes.push_back(a.axis);
   // With several unknown points in the pool, the largest cluster need not be half of it: look
   // for the best-supported point at a quantile that the smallest admissible cluster reaches.
   RobustIntersectOptions ro = options_.tracker.robust;
@@ -340,20 +352,23 @@ void InsertionPointSet::discover() {
     return;
   std::vector<PluckerLine> inl;
   std::vector<AxisCovariance> cov;
+  std::vector<double> stamps;
   for (int i : e.inliers) {
-    inl.push_back(pool_[static_cast<std::size_t>(i)].first);
-    cov.push_back(pool_[static_cast<std::size_t>(i)].second);
+    Pooled const& a = pool_[static_cast<std::size_t>(i)];
+    inl.push_back(a.axis);
+    cov.push_back(a.covariance);
+    stamps.push_back(a.stamp);
   }
   // A cluster at a known point is that point's (its axes strayed beyond the gate early on).
   for (auto& p : points_)
     if (p.tracker.estimate().ok() && samePoint(p.tracker.estimate(), e)) {
-      for (std::size_t i = 0; i < inl.size(); ++i) p.tracker.update(inl[i], cov[i]);
+      for (std::size_t i = 0; i < inl.size(); ++i) p.tracker.update(inl[i], cov[i], stamps[i]);
       p.last_update = fed_;
       dropExplained();
       return;
     }
   Entry entry{next_id_, InsertionPointTracker(options_.tracker), fed_};
-  if (!entry.tracker.initialise(inl, cov)) return;
+  if (!entry.tracker.initialise(inl, cov, stamps)) return;
   // Admissibility is judged on the covariance-weighted estimate: the plain one is biased toward
   // the image by the axes' angular noise (see InsertionPointTracker).
   if (options_.admissible && !options_.admissible(entry.tracker.estimate().position)) return;
@@ -363,9 +378,9 @@ void InsertionPointSet::discover() {
 }
 
 void InsertionPointSet::dropExplained() {
-  std::deque<std::pair<PluckerLine, AxisCovariance>> rest;
+  std::deque<Pooled> rest;
   for (auto const& a : pool_)
-    if (classify(a.first, nullptr, a.second) < 0) rest.push_back(a);
+    if (classify(a.axis, nullptr, a.covariance) < 0) rest.push_back(a);
   pool_.swap(rest);
 }
 

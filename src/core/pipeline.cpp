@@ -54,8 +54,9 @@ std::optional<ConstrainedAxis> axisThroughInsertionPoint(CylinderPose const& pos
   return std::nullopt;
 }
 
-int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep) {
-  int const id = set.update(pose.axis, pose.covariance);  // Eq. (6) + tracking
+int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep,
+               double stamp) {
+  int const id = set.update(pose.axis, pose.covariance, stamp);  // Eq. (6) + tracking
   *keep = !(reject_unattached && established && id < 0);
   return id;
 }
@@ -70,7 +71,7 @@ void Pipeline::reset() {
   tracker_ = ShaftTracker(params_.tracking);
 }
 
-PipelineOutput Pipeline::process(cv::Mat const& bgr) {
+PipelineOutput Pipeline::process(cv::Mat const& bgr, double stamp) {
   auto const t0 = std::chrono::steady_clock::now();
   PipelineOutput out;
   if (bgr.empty() || bgr.type() != CV_8UC3) {
@@ -98,7 +99,7 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr) {
     o.contour = c;
     o.pose = r.pose;
     bool keep = true;
-    o.insertion_point = attachAxis(points_, r.pose, params_.reject_unattached, established, &keep);
+    o.insertion_point = attachAxis(points_, r.pose, params_.reject_unattached, established, &keep, stamp);
     o.contour.insertion_point_id = o.insertion_point;
     o.track = c.track_id;
     if (!keep) {

@@ -148,7 +148,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"insertion_points/point_motion_sigma", d(T.tracker.point_motion_sigma)},
       {"insertion_points/gate_max", d(T.tracker.gate_max)},
       {"insertion_points/correlation_views", z(T.tracker.correlation_views)},
-      {"insertion_points/motion_correlation_views", z(T.tracker.motion_correlation_views)},
+      {"insertion_points/breathing_period", d(T.tracker.breathing_period)},
       {"tracking/max_angle_deg", d(p.tracking.max_angle_deg)},
       {"tracking/max_distance_px", d(p.tracking.max_distance_px)},
   };
@@ -195,6 +195,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
        "positive and below pose/max_distance");
   need(T.max_points >= 0, "insertion_points/max_points", ">= 0 (0: as many as the axes support)");
   need(T.tracker.max_sigma >= 0.0, "insertion_points/max_sigma", ">= 0 (0: no limit)");
+  need(T.tracker.breathing_period >= 0.0, "insertion_points/breathing_period", ">= 0 (s; 0: off)");
   // The growth levels index these lists (region_growing.h): refused, not guessed.
   auto const& g = S.regions.thresholds;
   if (g.empty() || !std::is_sorted(g.begin(), g.end()) || std::adjacent_find(g.begin(), g.end()) != g.end() || g.front() < 0 || g.back() > 255)

@@ -10,7 +10,6 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
-#include <algorithm>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -87,7 +86,7 @@ void InsertionPointsNodelet::onInit() {
   c.min_conditioning = params_.insertion_points.tracker.min_conditioning;
   c.max_sigma = params_.insertion_points.tracker.max_sigma;
   c.point_motion_sigma = params_.insertion_points.tracker.point_motion_sigma;
-  c.motion_correlation_views = static_cast<int>(std::min<std::size_t>(params_.insertion_points.tracker.motion_correlation_views, 2000));
+  c.breathing_period = params_.insertion_points.tracker.breathing_period;
   c.gate_max = params_.insertion_points.tracker.gate_max;
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](InsertionPointsConfig& cfg, uint32_t level) { configCb(cfg, level); });
@@ -108,7 +107,7 @@ void InsertionPointsNodelet::configCb(InsertionPointsConfig& c, uint32_t) {
   params_.insertion_points.tracker.min_conditioning = c.min_conditioning;
   params_.insertion_points.tracker.max_sigma = c.max_sigma;
   params_.insertion_points.tracker.point_motion_sigma = c.point_motion_sigma;
-  params_.insertion_points.tracker.motion_correlation_views = static_cast<std::size_t>(std::max(0, c.motion_correlation_views));
+  params_.insertion_points.tracker.breathing_period = c.breathing_period;
   params_.insertion_points.tracker.gate_max = c.gate_max;
   if (set_) set_->setOptions(params_.insertion_points);
 }
@@ -159,7 +158,7 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     }
     core::CylinderPose const& pose = *parsed;
     bool keep = true;
-    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep);
+    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, msg->header.stamp.toSec());
     if (!keep) continue;
     InstrumentAxis out = a;
     out.insertion_point_id = id;

@@ -127,7 +127,7 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       out.latency_ms = msSince(t1);
       R.hsv_ratio.push_back(out.latency_ms / std::max(hsv_ms, 1e-6));
     } else {
-      out = pipe.process(img);
+      out = pipe.process(img, k / so.fps);
     }
     char const* const how = baseline ? "baseline" : out.segmentation.tracked ? "tracked" : "detected";
     ++R.frames;

@@ -387,7 +387,7 @@ int main(int argc, char** argv) {
           cv::Mat img = f.image;
           if (!map1.empty() && img.size() == cv::Size(cam->width, cam->height)) cv::remap(f.image, img, map1, map2, cv::INTER_LINEAR);
           if (independent) pipe.reset();
-          out = pipe.process(img);
+          out = pipe.process(img, f.stamp);
           if (out.error.empty()) last = out;
           if (!overlay.empty() && out.error.empty()) {
             cv::Mat ov = img.clone();

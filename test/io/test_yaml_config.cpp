@@ -58,7 +58,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
                           "segmentation:\n  full_search_max_every: 0\n", "segmentation:\n  refused_area_change: 1.5\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
-                          "insertion_points:\n  max_points: -1\n"}) {
+                          "insertion_points:\n  max_points: -1\n", "insertion_points:\n  breathing_period: -4\n"}) {
     PipelineParams q;
     try {
       io::loadPipelineYaml(write("bad.yaml", bad), q);
@@ -81,7 +81,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.sigma_delta, defaults.segmentation.sigma_delta);
   EXPECT_EQ(shipped.insertion_points.tracker.memory_views, defaults.insertion_points.tracker.memory_views);
   EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
-  EXPECT_EQ(shipped.insertion_points.tracker.motion_correlation_views, defaults.insertion_points.tracker.motion_correlation_views);
+  EXPECT_EQ(shipped.insertion_points.tracker.breathing_period, defaults.insertion_points.tracker.breathing_period);
   EXPECT_EQ(shipped.pose.min_distance, defaults.pose.min_distance);
   EXPECT_EQ(shipped.segmentation.seeds.relative_threshold, defaults.segmentation.seeds.relative_threshold);
   EXPECT_EQ(shipped.segmentation.seeds.run_floor, defaults.segmentation.seeds.run_floor);

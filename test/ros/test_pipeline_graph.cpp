@@ -396,18 +396,20 @@ TEST_F(Graph, BadInputsAreReportedSkippedAndTheNodeKeepsRunning) {
 
 
 namespace {
-// Sets an int parameter of `node`'s dynamic_reconfigure server; the value it reports back (-1:
-// the call failed or the parameter is not in its config).
-int setIntParameter(std::string const& node, std::string const& name, int value) {
+// Sets a parameter of `node`'s dynamic_reconfigure server, in the config's list `list` (ints,
+// doubles); the value it reports back (-1: the call failed or the parameter is not in its config).
+template <typename Param>
+double setParameter(std::string const& node, std::string const& name, double value,
+                    std::vector<Param> dynamic_reconfigure::Config::*list) {
   dynamic_reconfigure::Reconfigure srv;
-  dynamic_reconfigure::IntParameter p;
+  Param p;
   p.name = name;
-  p.value = value;
-  srv.request.config.ints.push_back(p);
-  if (!callService(node + "/set_parameters", srv)) return -1;
-  for (auto const& q : srv.response.config.ints)
+  p.value = static_cast<decltype(p.value)>(value);
+  (srv.request.config.*list).push_back(p);
+  if (!callService(node + "/set_parameters", srv)) return -1.0;
+  for (auto const& q : srv.response.config.*list)
     if (q.name == name) return q.value;
-  return -1;
+  return -1.0;
 }
 }  // namespace
 
@@ -416,7 +418,9 @@ TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
   SyntheticScene scene(defaultInstruments(), so_);
   SceneRenderer renderer(so_.width, so_.height);
   cv::Mat const good = renderer.render(scene.frame(30), 30);
-  auto set = [](int threshold) { return setIntParameter("endoscope/segmentation", "seed_threshold", threshold) == threshold; };
+  auto set = [](int threshold) {
+    return setParameter("endoscope/segmentation", "seed_threshold", threshold, &dynamic_reconfigure::Config::ints) == threshold;
+  };
   ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
   ASSERT_TRUE(publish(good, ros::Time(2000.0)));
   ASSERT_GE(contours_.get()->contours.size(), 1u);
@@ -428,14 +432,16 @@ TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
   EXPECT_GE(contours_.get()->contours.size(), 1u);
 }
 
-// The breathing cycle (axes over which a trocar's own motion is shared) is tunable at run time,
-// as the ventilator's rate is per patient: the server takes it and reports it back.
-TEST_F(Graph, DynamicReconfigureTakesTheBreathingCycle) {
+// The breathing period (over which a trocar's own motion is shared by the axes) is tunable at run
+// time, as the ventilator's rate is per patient: the server takes it and reports it back.
+TEST_F(Graph, DynamicReconfigureTakesTheBreathingPeriod) {
   ASSERT_TRUE(ros::service::waitForService("endoscope/insertion_points/set_parameters", 5000));
-  auto set = [](int views) { return setIntParameter("endoscope/insertion_points", "motion_correlation_views", views); };
-  EXPECT_EQ(set(150), 150);
-  EXPECT_EQ(set(0), 0);
-  EXPECT_EQ(set(100), 100);
+  auto set = [](double period) {
+    return setParameter("endoscope/insertion_points", "breathing_period", period, &dynamic_reconfigure::Config::doubles);
+  };
+  EXPECT_EQ(set(5.5), 5.5);
+  EXPECT_EQ(set(0.0), 0.0);
+  EXPECT_EQ(set(4.0), 4.0);
 }
 
 // Services: freeze keeps a trocar where it is; reset forgets them.

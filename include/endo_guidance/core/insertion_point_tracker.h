@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <deque>
 #include <functional>
+#include <limits>
 #include <vector>
 
 #include "endo_guidance/core/insertion_point.h"
@@ -37,11 +38,12 @@ struct InsertionPointTrackerOptions {
                                      ///< errors (compression, breathing), so the model covariance, which
                                      ///< takes them as independent, was 3-7x too small in the hard
                                      ///< rendered scene (Mahalanobis distance of the true mean, median 2.8-4.4)
-  std::size_t motion_correlation_views = 100; ///< axes over which the trocar's own motion is shared (a
-                                     ///< breathing cycle: 4 s at 25 Hz, one axis per frame; 0: only the
-                                     ///< blocks above): the covariance along the mean axis is at least
-                                     ///< min(rms, point_motion_sigma) / spread per independent cycle. A slow
-                                     ///< sweep of precise axes about a breathing trocar was located 12-19 mm off
+  double breathing_period = 4.0;     ///< s (0: off): the trocar's own motion is shared by the axes of a
+                                     ///< breathing cycle, so the covariance along the mean axis is at least
+                                     ///< min(rms, point_motion_sigma) / spread per cycle seen (the time the
+                                     ///< axes span, from their stamps). A slow sweep of precise axes about a
+                                     ///< breathing trocar was located 12-19 mm off without it
+  double assumed_axis_interval = 0.04; ///< s between axes given without a stamp (25 Hz)
   RobustIntersectOptions robust;
 };
 
@@ -68,7 +70,8 @@ struct InsertionPointTrackerOptions {
 /// and at least \f$ \mathrm{rms}^2 / (\mathrm{spread}^2\, G) \f$ along the mean axis, G the number of
 /// independent groups of correlation_views axes (the along-axis error of a shared error), and at
 /// least \f$ \min(\mathrm{rms}, \sigma_b)^2 / (\mathrm{spread}^2\, G_b) \f$, G_b the number of
-/// motion_correlation_views axes (breathing cycles) seen: the trocar's own motion is shared longer.
+/// breathing cycles the axes span (breathing_period; each pause counted as one cycle at most): the
+/// trocar's own motion is shared by every axis of a cycle.
 /// Memory is O(1) in the axes, plus a
 /// bounded window of recent axes. Axes beyond the gate are rejected (not accumulated); a run of
 /// rejections re-initialises the estimate robustly (LMedS, Eq. (3)) from the most recent axes.
@@ -78,10 +81,14 @@ class InsertionPointTracker {
 
   explicit InsertionPointTracker(InsertionPointTrackerOptions const& options = {});
 
-  /// Feeds one axis (camera frame) and its covariance (zero: default_axis_sigma is assumed).
-  Update update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero());
-  /// Seeds the tracker from a batch of axes (robust Eq. (3), then reweighted on the inliers).
-  bool initialise(std::vector<PluckerLine> const& axes, std::vector<AxisCovariance> const& covariances = {});
+  /// Feeds one axis (camera frame), its covariance (zero: default_axis_sigma is assumed) and the
+  /// time it was seen (s, any origin, non-decreasing; NaN: assumed_axis_interval after the last).
+  Update update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero(),
+                double stamp = std::numeric_limits<double>::quiet_NaN());
+  /// Seeds the tracker from a batch of axes (robust Eq. (3), then reweighted on the inliers);
+  /// covariances and stamps as in update(), either may be empty.
+  bool initialise(std::vector<PluckerLine> const& axes, std::vector<AxisCovariance> const& covariances = {},
+                  std::vector<double> const& stamps = {});
 
   bool initialized() const { return initialized_; }
   /// The current estimate; status kTooFewAxes until initialised.
@@ -112,6 +119,7 @@ class InsertionPointTracker {
   struct Observation {
     PluckerLine axis;
     AxisCovariance covariance;
+    double stamp;  ///< s, NaN: none
   };
   Eigen::Matrix3d residualCovariance(PluckerLine const& axis, AxisCovariance const& cov, Eigen::Vector3d const& x) const;
   void accumulate(Observation const& o, Eigen::Vector3d const& at);
@@ -138,6 +146,9 @@ class InsertionPointTracker {
   Eigen::Matrix4d open_M_ = Eigen::Matrix4d::Zero();
   std::size_t open_n_ = 0;
   double sw_ = 0.0, sw2_ = 0.0;
+  /// Time spanned by the accepted axes, forgotten like sw_ (each interval at most a breathing
+  /// cycle), and the last accepted axis's stamp.
+  double span_ = 0.0, last_stamp_ = std::numeric_limits<double>::quiet_NaN();
   std::size_t accepted_ = 0, rejected_ = 0, consecutive_rejects_ = 0;
   InsertionPointEstimate estimate_;
 };
@@ -169,8 +180,10 @@ struct InsertionPointSetOptions {
 class InsertionPointSet {
  public:
   explicit InsertionPointSet(InsertionPointSetOptions const& options = {});
-  /// Feeds one axis; returns the id of the point it was attached to, or -1.
-  int update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero());
+  /// Feeds one axis (its stamp as in InsertionPointTracker::update()); returns the id of the point
+  /// it was attached to, or -1.
+  int update(PluckerLine const& axis, AxisCovariance const& covariance = AxisCovariance::Zero(),
+             double stamp = std::numeric_limits<double>::quiet_NaN());
   /// Id of the point an axis passes through (nearest within its gate), or -1; no update.
   int classify(PluckerLine const& axis, double* distance = nullptr,
                AxisCovariance const& covariance = AxisCovariance::Zero()) const;
@@ -197,7 +210,12 @@ class InsertionPointSet {
   InsertionPointSetOptions options_;
   std::size_t fed_ = 0;
   std::vector<Entry> points_;
-  std::deque<std::pair<PluckerLine, AxisCovariance>> pool_;
+  struct Pooled {
+    PluckerLine axis;
+    AxisCovariance covariance;
+    double stamp;
+  };
+  std::deque<Pooled> pool_;
   std::size_t since_discover_ = 0;
   int next_id_ = 0;
 };

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
@@ -73,8 +74,10 @@ std::optional<ConstrainedAxis> axisThroughInsertionPoint(CylinderPose const& pos
                                                          std::vector<InsertionPointReport> const& reports, double point_motion_sigma);
 /// The attachment stage ([Doignon07] Eq. (6) + tracking): feeds the axis to the set and returns
 /// the id of its insertion point (-1: none); *keep is false when the shaft must not be reported
-/// (reject_unattached, an established point and no attachment).
-int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep);
+/// (reject_unattached, an established point and no attachment). `stamp`: when the axis was seen
+/// (s; NaN: 1 / 25 s after the last), for the breathing's share of the points' covariance.
+int attachAxis(InsertionPointSet& set, CylinderPose const& pose, bool reject_unattached, bool established, bool* keep,
+               double stamp = std::numeric_limits<double>::quiet_NaN());
 
 /// The whole per-frame pipeline ([Doignon07]): segmentation (focused by the images of the
 /// insertion points) -> cylinder pose -> attachment to insertion points / discovery -> tracks.
@@ -83,7 +86,8 @@ class Pipeline {
  public:
   /// K: intrinsics of the (rectified) images; size: their expected size.
   Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params = {});
-  PipelineOutput process(cv::Mat const& bgr);
+  /// One frame, seen at `stamp` (s, any origin; NaN: 1 / 25 s after the last frame).
+  PipelineOutput process(cv::Mat const& bgr, double stamp = std::numeric_limits<double>::quiet_NaN());
   /// Forgets every frame seen: the segmentation's memory (seed levels, tracked shafts, field of
   /// view), the insertion points and the shaft tracks. The next process() gives what a new
   /// Pipeline with the same arguments would (unrelated stills: each on its own).
