@@ -11,6 +11,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <chrono>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -150,6 +151,8 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
   instruments->header = msg->header;
   std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
   std::vector<core::CylinderPose> poses;  // per reported instrument: its measured axis
+  // (an unstamped message: the tracker assumes 25 Hz; a zero stamp for every message would span no time)
+  double const stamp = msg->header.stamp.isZero() ? std::numeric_limits<double>::quiet_NaN() : msg->header.stamp.toSec();
   for (auto const& a : msg->axes) {
     auto const parsed = ros_io::fromMsg(a);
     if (!parsed) {
@@ -158,7 +161,7 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     }
     core::CylinderPose const& pose = *parsed;
     bool keep = true;
-    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, msg->header.stamp.toSec());
+    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, stamp);
     if (!keep) continue;
     InstrumentAxis out = a;
     out.insertion_point_id = id;
