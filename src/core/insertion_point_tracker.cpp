@@ -81,7 +81,7 @@ bool InsertionPointTracker::located() const {
   return !(options_.max_sigma > 0.0) || estimate_.longestSigma() <= options_.max_sigma;
 }
 
-void InsertionPointTracker::accumulate(Observation const& o, Eigen::Vector3d const& at) {
+void InsertionPointTracker::accumulate(AxisObservation const& o, Eigen::Vector3d const& at) {
   Eigen::Vector3d const& d = o.axis.direction();
   Eigen::Vector3d const m = o.axis.moment() - origin_.cross(d);  // the axis relative to origin_
   Eigen::Matrix<double, 3, 4> Bk;
@@ -223,7 +223,7 @@ void InsertionPointTracker::solve() {
   estimate_ = e;
 }
 
-bool InsertionPointTracker::initialiseFrom(std::vector<Observation> const& obs) {
+bool InsertionPointTracker::initialiseFrom(std::vector<AxisObservation> const& obs) {
   std::vector<PluckerLine> axes;
   for (auto const& o : obs) axes.push_back(o.axis);
   InsertionPointEstimate const e = intersectAxesRobust(axes, options_.robust);  // Eq. (3), LMedS
@@ -244,7 +244,7 @@ bool InsertionPointTracker::initialiseFrom(std::vector<Observation> const& obs) 
 
 bool InsertionPointTracker::initialise(std::vector<PluckerLine> const& axes, std::vector<AxisCovariance> const& covariances,
                                        std::vector<double> const& stamps) {
-  std::vector<Observation> obs;
+  std::vector<AxisObservation> obs;
   for (std::size_t i = 0; i < axes.size(); ++i)
     obs.push_back({axes[i], i < covariances.size() ? covariances[i] : AxisCovariance::Zero(),
                    i < stamps.size() ? stamps[i] : std::numeric_limits<double>::quiet_NaN()});
@@ -354,7 +354,7 @@ void InsertionPointSet::discover() {
   std::vector<AxisCovariance> cov;
   std::vector<double> stamps;
   for (int i : e.inliers) {
-    Pooled const& a = pool_[static_cast<std::size_t>(i)];
+    AxisObservation const& a = pool_[static_cast<std::size_t>(i)];
     inl.push_back(a.axis);
     cov.push_back(a.covariance);
     stamps.push_back(a.stamp);
@@ -378,7 +378,7 @@ void InsertionPointSet::discover() {
 }
 
 void InsertionPointSet::dropExplained() {
-  std::deque<Pooled> rest;
+  std::deque<AxisObservation> rest;
   for (auto const& a : pool_)
     if (classify(a.axis, nullptr, a.covariance) < 0) rest.push_back(a);
   pool_.swap(rest);

@@ -13,6 +13,14 @@ namespace endo_guidance::core {
 
 using AxisCovariance = Eigen::Matrix<double, 6, 6>;  ///< of (direction, moment), as CylinderPose
 
+/// One axis as the insertion points take it: the axis (camera frame), its covariance (zero: none
+/// given) and when it was seen (s; NaN: none).
+struct AxisObservation {
+  PluckerLine axis;
+  AxisCovariance covariance;
+  double stamp;
+};
+
 struct InsertionPointTrackerOptions {
   std::size_t window = 300;          ///< axes kept for (re)initialisation (bounded memory)
   double memory_views = 500.0;       ///< forgetting time constant, in accepted axes (rho = exp(-1/memory)):
@@ -116,21 +124,16 @@ class InsertionPointTracker {
   InsertionPointTrackerOptions const& options() const { return options_; }
 
  private:
-  struct Observation {
-    PluckerLine axis;
-    AxisCovariance covariance;
-    double stamp;  ///< s, NaN: none
-  };
   Eigen::Matrix3d residualCovariance(PluckerLine const& axis, AxisCovariance const& cov, Eigen::Vector3d const& x) const;
-  void accumulate(Observation const& o, Eigen::Vector3d const& at);
+  void accumulate(AxisObservation const& o, Eigen::Vector3d const& at);
   void clearSums();
   void solve();
   Eigen::Matrix3d clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt, double* blocks) const;
-  bool initialiseFrom(std::vector<Observation> const& obs);
+  bool initialiseFrom(std::vector<AxisObservation> const& obs);
 
   InsertionPointTrackerOptions options_;
   double rho_;
-  std::deque<Observation> window_;
+  std::deque<AxisObservation> window_;
   bool initialized_ = false;
   bool frozen_ = false;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
@@ -210,12 +213,7 @@ class InsertionPointSet {
   InsertionPointSetOptions options_;
   std::size_t fed_ = 0;
   std::vector<Entry> points_;
-  struct Pooled {
-    PluckerLine axis;
-    AxisCovariance covariance;
-    double stamp;
-  };
-  std::deque<Pooled> pool_;
+  std::deque<AxisObservation> pool_;
   std::size_t since_discover_ = 0;
   int next_id_ = 0;
 };
