@@ -283,11 +283,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
       ++res.strip_searches;
       auto sc = searchStrip(filtered_, rays_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
       if (!sc) return;
-      ContourFit f = refineContour(sc->sides, sc->region, fov_, bgr, scale, params_.contours);
-      if (f.contour && !stripAgrees(*sc, *f.contour, scale, params_.strip)) {
-        f.contour.reset();
-        f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
-      }
+      ContourFit f = refineStrip(*sc, fov_, bgr, scale, params_.strip, params_.contours);
       if (f.contour) {
         AcrossSamples const across = acrossContour(bgr, *f.contour, edgeWeight());
         if (!stripContrastFullRes(across, params_.strip)) f.rejection = ContourRejection::kLowContrast;
@@ -553,14 +549,20 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is
   // a duplicate as in the other order (in-vivo OP1/img_16 and OP2/img_03 were reported twice).
   // Its seed's memory stays a shaft's, as for a duplicate refused above.
-  auto const dup = narrowerDuplicates(res.contours);
-  for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
-    std::size_t const i = *it;
-    res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
-    res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
-    res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
-    contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
-  }
+  auto drop = [&](std::vector<std::size_t> const& dup) {
+    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
+      std::size_t const i = *it;
+      res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
+      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
+      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
+      contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
+      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
+    }
+  };
+  drop(narrowerDuplicates(res.contours));
+  // Then contours that overlap one that fits better: a wedge between a shaft's edge and a
+  // tissue edge, found as a strip from a seed beside that shaft (not parallel to it).
+  drop(overlappingDuplicates(res.contours));
   labels_ = grower_.labels();
   // A refused seed's run that is missing in this frame (a run near the seed threshold flickers:
   // robotic Dataset 1, about one seed per frame) keeps its memory while a full or strip search
@@ -758,6 +760,50 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
     if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
   }
   return false;
+}
+
+namespace {
+// The quadrilateral between the contour's lines from the feet of its entry to those of its tip.
+std::vector<cv::Point2f> shaftQuad(ApparentContour const& c) {
+  std::vector<cv::Point2f> q;
+  for (Eigen::Vector2d const& e : {c.entry_px, c.tip_px})
+    for (int k = 0; k < 2; ++k) {
+      Eigen::Vector2d const f = footOnLine(c.lines[k], e);
+      q.emplace_back(static_cast<float>(f.x()), static_cast<float>(f.y()));
+    }
+  std::swap(q[2], q[3]);  // around: entry 0, entry 1, tip 1, tip 0
+  std::vector<cv::Point2f> hull;  // (convex as cv::intersectConvexConvex() needs, whatever the lines' convergence)
+  cv::convexHull(q, hull);
+  return hull;
+}
+}  // namespace
+
+std::vector<std::size_t> overlappingDuplicates(std::vector<ApparentContour> const& found) {
+  std::vector<std::vector<cv::Point2f>> quad;
+  std::vector<double> area;
+  for (ApparentContour const& c : found) {
+    quad.push_back(shaftQuad(c));
+    area.push_back(std::abs(cv::contourArea(quad.back())));
+  }
+  std::vector<std::size_t> order(found.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return found[a].residual_px < found[b].residual_px; });
+  std::vector<std::size_t> kept, out;
+  for (std::size_t i : order) {
+    bool overlaps = false;
+    for (std::size_t j : kept) {
+      std::vector<cv::Point2f> common;
+      float const a = cv::intersectConvexConvex(quad[i], quad[j], common, true);
+      if (a > kMaxShaftOverlap * (area[i] + area[j] - a)) {  // intersection over union
+        overlaps = true;
+        break;
+      }
+    }
+    (overlaps ? out : kept).push_back(i);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
 }
 
 std::vector<std::size_t> narrowerDuplicates(std::vector<ApparentContour> const& found) {

@@ -552,6 +552,25 @@ bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, in
   return true;
 }
 
+ContourFit refineStrip(StripCandidate const& strip, FieldOfView const& fov, cv::Mat const& bgr, int scale,
+                       StripSearchParams const& p, ContourLinesParams const& lines) {
+  ContourFit f = refineContour(strip.sides, strip.region, fov, bgr, scale, lines);
+  if (!f.contour || stripAgrees(strip, *f.contour, scale, p)) return f;
+  // The wide pass took the steepest edge within +-coarse_halfwidth_px of the strip's side:
+  // narrower windows leave a neighbouring edge out (only when the lines left the strip).
+  if (p.retry_min_halfwidth_px > 0.0) {
+    ContourLinesParams narrow = lines;
+    for (double h = lines.coarse_halfwidth_px - 1.0; h >= p.retry_min_halfwidth_px; h -= 1.0) {
+      narrow.coarse_halfwidth_px = h;
+      ContourFit g = refineContour(strip.sides, strip.region, fov, bgr, scale, narrow);
+      if (g.contour && stripAgrees(strip, *g.contour, scale, p)) return g;
+    }
+  }
+  f.contour.reset();
+  f.rejection = ContourRejection::kNotStraight;  // the sub-pixel lines left the strip
+  return f;
+}
+
 bool stripContrastFullRes(cv::Mat const& bgr, ApparentContour const& c, StripSearchParams const& p, float w) {
   return stripContrastFullRes(acrossContour(bgr, c, w), p);
 }

@@ -137,6 +137,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/strip_max_full_res_ratio_matte", d(S.strip.max_full_res_ratio_matte)},
       {"segmentation/strip_max_specular_fraction", d(S.strip.max_specular_fraction)},
       {"segmentation/strip_full_res_outside_quantile", d(S.strip.full_res_outside_quantile)},
+      {"segmentation/strip_retry_min_halfwidth_px", d(S.strip.retry_min_halfwidth_px)},
       {"pose/min_distance", d(p.pose.min_distance)},
       {"pose/max_distance", d(p.pose.max_distance)},
       {"insertion_points/max_points", i(T.max_points)},
@@ -187,6 +188,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(S.resought_max_widening >= 1.0, "segmentation/resought_max_widening", ">= 1");
   need(S.strip.full_res_outside_quantile >= 0.0 && S.strip.full_res_outside_quantile <= 1.0,
        "segmentation/strip_full_res_outside_quantile", "in [0, 1]");
+  need(S.strip.retry_min_halfwidth_px >= 0.0, "segmentation/strip_retry_min_halfwidth_px", ">= 0 (px; 0: no retry)");
   need(S.tracking.detect_every >= 1, "segmentation/detect_every", ">= 1");
   need(S.regions.max_regions >= 1, "segmentation/max_regions", ">= 1");
   need(S.seeds.threshold >= 0 && S.seeds.threshold <= 255, "segmentation/seed_threshold", "in [0, 255]");

@@ -175,44 +175,92 @@ TEST(StripSearch, BadInput) {
   EXPECT_NO_THROW(walkRays(rays, d.gx, d.gy, d.fov, {}));
 }
 
-// In the segmentation: a grey shaft whose grown region runs into a grey membrane lying along the
-// border below it. Without the strip search the shaft is lost; with it, the contour lines are
-// sub-pixel.
-TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
-  cv::Mat img(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
-  cv::Mat noise(img.size(), CV_8UC3);
-  cv::randn(noise, 0, 3);
-  img += noise;
-  // The membrane: pale and grey, along the left border, touching the shaft's lower side.
-  cv::rectangle(img, cv::Rect(0, 255, 160, 225), cv::Scalar(150, 150, 158), cv::FILLED);
-  cv::Point2d const a0(-5, 200), a1(450, 290), b1(450, 334), b0(-5, 258);
-  fillExact(img, {a0, a1, b1, b0}, cv::Scalar(118, 118, 122));
-  cv::GaussianBlur(img, img, cv::Size(5, 5), 1.0);  // symmetric: the edges stay where they are
-  Eigen::Vector3d const la = lineThrough(a0, a1), lb = lineThrough(b0, b1);
-  auto onShaft = [&](ApparentContour const& c) {
+namespace {
+// A grey shaft entering at the left border (sides from (-5, 200) to (450, 290) and from (-5, 258)
+// to (450, 334)) on red tissue, whose grown region runs into a pale grey membrane below it, 20 px
+// in from the border: the shaft's border run is its own (a run over both lets no side start at
+// the shaft's lower edge). crease > 0: a dark red crease in the tissue along the shaft's upper
+// side (as chromatic as the tissue in S.H, less in chroma: 32 against 130), its outer edge
+// `crease` px beyond the shaft's, 3 px wide, and darker tissue between them (chroma 65).
+struct LeakingShaft {
+  cv::Mat img;
+  Eigen::Vector3d la, lb;  // the true sides
+  // The largest distance of the contour's lines, at u = 60, 250 and 400, to the nearer true side.
+  double error(ApparentContour const& c) const {
     double worst = 0.0;
     for (auto const& l : c.lines)
       for (double x : {60.0, 250.0, 400.0}) {
-        // The contour line at x, compared with the nearer true side there.
         double const y = -(l.x() * x + l.z()) / l.y();
         worst = std::max(worst, std::min(dist(la, {x, y}), dist(lb, {x, y})));
       }
     return worst;
-  };
+  }
+};
+LeakingShaft leakingShaft(std::uint64_t noise_seed, double crease) {
+  LeakingShaft s;
+  s.img = cv::Mat(480, 640, CV_8UC3, cv::Scalar(70, 90, 200));
+  cv::Mat noise(s.img.size(), CV_8UC3);
+  cv::RNG(noise_seed).fill(noise, cv::RNG::NORMAL, 0, 3);  // (its own generator: not the tests' order)
+  s.img += noise;
+  cv::rectangle(s.img, cv::Rect(20, 255, 160, 225), cv::Scalar(150, 150, 158), cv::FILLED);
+  cv::Point2d const a0(-5, 200), a1(450, 290), b1(450, 334), b0(-5, 258);
+  if (crease > 0.0) {
+    Eigen::Vector2d const u = Eigen::Vector2d(a1.x - a0.x, a1.y - a0.y).normalized(), up(u.y(), -u.x());
+    auto off = [&](cv::Point2d p, double d) { return cv::Point2d(p.x + d * up.x(), p.y + d * up.y()); };
+    fillExact(s.img, {off(a0, crease), off(a1, crease), a1, a0}, cv::Scalar(35, 45, 100));
+    fillExact(s.img, {off(a0, crease), off(a1, crease), off(a1, crease - 3), off(a0, crease - 3)}, cv::Scalar(8, 10, 40));
+  }
+  fillExact(s.img, {a0, a1, b1, b0}, cv::Scalar(118, 118, 122));
+  cv::GaussianBlur(s.img, s.img, cv::Size(5, 5), 1.0);  // symmetric: the edges stay where they are
+  s.la = lineThrough(a0, a1);
+  s.lb = lineThrough(b0, b1);
+  return s;
+}
+}  // namespace
+
+// In the segmentation: the shaft whose grown region runs into the membrane (leakingShaft()).
+// Without the strip search the shaft is lost; with it, the contour lines are sub-pixel. Both
+// without the side pair sought as the stretch parallel to the other side (SideSearch), which
+// finds this shaft too: with it on, this test passed without the strip search finding anything
+// (and with the membrane along the border, the strip search found nothing).
+TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
+  LeakingShaft const scene = leakingShaft(5, 0.0);
   SegmentationParams sp;
   sp.strip.enabled = false;
-  sp.contours.min_parallel_side_ratio = 0.0;  // (nor as a side pair beside the membrane: SideSearch)
+  sp.contours.min_parallel_side_ratio = 0.0;
   InstrumentSegmenter without(sp);
-  auto const r0 = without.process(img);
-  for (auto const& c : r0.contours) EXPECT_GT(onShaft(c), 0.5) << "found without the strip search: the test scene does not leak";
-  InstrumentSegmenter with;
-  auto const r1 = with.process(img);
+  auto const r0 = without.process(scene.img);
+  for (auto const& c : r0.contours) EXPECT_GT(scene.error(c), 0.5) << "found without the strip search: the test scene does not leak";
+  sp.strip.enabled = true;
+  InstrumentSegmenter with(sp);
+  auto const r1 = with.process(scene.img);
   ASSERT_EQ(r1.contours.size(), 1u);
-  EXPECT_LT(onShaft(r1.contours[0]), 0.5);
+  EXPECT_LT(scene.error(r1.contours[0]), 0.5);
   // Video: the next frame tracks the strip and finds it again.
-  auto const r2 = with.process(img);
+  auto const r2 = with.process(scene.img);
   ASSERT_EQ(r2.contours.size(), 1u);
-  EXPECT_LT(onShaft(r2.contours[0]), 0.5);
+  EXPECT_LT(scene.error(r2.contours[0]), 0.5);
+}
+
+// refineStrip(): the leaking shaft with a crease 6.5 px beyond its upper side (in-vivo OP2/img_20
+// and img_24). The wide pass (+-9 px) takes the crease's edge, steeper in chroma than the
+// shaft's, and the line leaves the strip (more than max_refine_shift, 6 px): without the retry
+// the shaft is not found; with it, a narrower pass finds the shaft's edge. (At 6 px the line
+// stays within the tolerance, at the crease, retry or not; at 5.5 px the retry's first pass
+// stays on it too.)
+TEST(StripSearch, AStripWhoseLinesLockedOntoACreaseIsRefinedAgainNarrower) {
+  LeakingShaft const scene = leakingShaft(11, 6.5);
+  SegmentationParams sp;
+  sp.contours.min_parallel_side_ratio = 0.0;  // (the strip search finds it)
+  SegmentationParams no_retry = sp;
+  no_retry.strip.retry_min_halfwidth_px = 0.0;
+  InstrumentSegmenter without(no_retry);
+  auto const r0 = without.process(scene.img);
+  for (auto const& c : r0.contours) EXPECT_GT(scene.error(c), 0.5) << "found without the retry: the crease did not capture the wide pass";
+  InstrumentSegmenter with(sp);
+  auto const r1 = with.process(scene.img);
+  ASSERT_EQ(r1.contours.size(), 1u);
+  EXPECT_LT(scene.error(r1.contours[0]), 0.5);
 }
 
 namespace {

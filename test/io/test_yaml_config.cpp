@@ -55,6 +55,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                           "segmentation:\n  resought_min_tip_depth_px: -1\n",
                           "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  strip_full_res_outside_quantile: 1.5\n",
+                          "segmentation:\n  strip_retry_min_halfwidth_px: -1\n",
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
                           "segmentation:\n  full_search_max_every: 0\n", "segmentation:\n  refused_area_change: 1.5\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
@@ -106,7 +107,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   using SP = StripSearchParams;
   for (double SP::*m : {&SP::max_angle_deg, &SP::min_response, &SP::min_inside_low, &SP::max_inside_outside_ratio,
                         &SP::min_length_ratio, &SP::max_full_res_ratio, &SP::max_full_res_ratio_matte,
-                        &SP::max_specular_fraction, &SP::full_res_outside_quantile})
+                        &SP::max_specular_fraction, &SP::full_res_outside_quantile, &SP::retry_min_halfwidth_px})
     EXPECT_EQ(shipped.segmentation.strip.*m, defaults.segmentation.strip.*m);
   PipelineParams off;
   io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n  strip_search_max_every: 40\n  crossing_seeds: false\n"), off);

@@ -172,6 +172,21 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
 /// instrument (two instruments cannot overlap by half a width and stay parallel).
 std::vector<std::size_t> narrowerDuplicates(std::vector<ApparentContour> const& found);
 
+/// Two instruments' images overlap little: crossing shafts share a parallelogram about a width
+/// square, touching ones an edge. Two contours whose quadrilaterals (between their lines, from
+/// the feet of the entry to those of the tip) overlap by more than this fraction of their union
+/// (intersection over union, as in a detector's non-maximum suppression) are one shaft seen
+/// twice, or a shaft and a wedge between one of its edges and a tissue edge (in-vivo
+/// OP2/img_34: 0.47, a strip from a seed beside a shaft found first). A 30 px shaft crossing an
+/// 80 px one at 30 deg, over half of it on the other: 0.17.
+inline constexpr double kMaxShaftOverlap = 1.0 / 3.0;
+/// The contours of `found` that overlap (kMaxShaftOverlap) one with a smaller RMS line residual
+/// (ApparentContour::residual_px; at equal residuals the earlier one is kept), ascending: the
+/// contours are kept in order of residual, each unless it overlaps one kept before it. The
+/// wedge's tissue line fits its edge points worse (0.56 against 0.32 px; in-vivo OP2/img_03 the
+/// whole shaft 0.34 against a strip inside it 0.40, which narrowerDuplicates() drops first).
+std::vector<std::size_t> overlappingDuplicates(std::vector<ApparentContour> const& found);
+
 /// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image
 /// (seed Fig. 1, 2, 6).
 void drawSegmentationOverlay(cv::Mat& bgr, SegmentationResult const& result,

@@ -40,6 +40,13 @@ struct StripSearchParams {
   /// throughout (robotic DS1: 146 -> 160 of 160 shafts found; in-vivo 76 -> 78 of 98).
   double full_res_outside_quantile = 0.75;
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
+  /// full-res px: a strip whose sub-pixel lines left it (stripAgrees()) is refined again with the
+  /// wide pass's half-width (ContourLinesParams::coarse_halfwidth_px, 9 px) 1 px narrower at a
+  /// time, down to this, until they stay on it (refineStrip(); 0: no retry). In-vivo 78 -> 80 of
+  /// 98 shafts found with no more false ones (OP2/img_20, img_24: the wide pass locked onto a
+  /// tissue edge 3-4 px beyond the shaft's); one narrower pass alone (5 px) found the same two,
+  /// 4-6 px only img_24.
+  double retry_min_halfwidth_px = 3.0;
 };
 
 /// One side hypothesis of the strip search: a ray from a border point into the view.
@@ -101,6 +108,13 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const&
 /// max_refine_shift (processing px) of the side it was refined from, at both ends of that side.
 /// The wide sub-pixel pass can otherwise lock onto a neighbouring tissue edge.
 bool stripAgrees(StripCandidate const& strip, ApparentContour const& contour, int scale, StripSearchParams const& params);
+
+/// The strip's sub-pixel contour (refineContour()) that stays on it (stripAgrees()): when the
+/// wide pass locks onto a neighbouring edge (a tissue fold a few px beyond a weak shaft edge),
+/// the strip is refined again with the wide pass narrowed (retry_min_halfwidth_px). Rejected as
+/// kNotStraight when no pass stays on the strip.
+ContourFit refineStrip(StripCandidate const& strip, FieldOfView const& fov, cv::Mat const& bgr, int scale,
+                       StripSearchParams const& params, ContourLinesParams const& lines);
 
 /// Whether the shaft between the contour's lines is, on the full-resolution image, clearly less
 /// chromatic than the tissue beside each line: median chroma inside <= max_full_res_ratio x the
