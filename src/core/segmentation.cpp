@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -561,7 +562,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   };
   drop(narrowerDuplicates(res.contours));
   // Then contours that overlap one that fits better: a wedge between a shaft's edge and a
-  // tissue edge, found as a strip from a seed beside that shaft (not parallel to it).
+  // tissue edge, found as a strip from a seed beside that shaft (not parallel to it). Its seed's
+  // memory stays a shaft's too (its strip is tried first next frame, and dropped again).
   drop(overlappingDuplicates(res.contours));
   labels_ = grower_.labels();
   // A refused seed's run that is missing in this frame (a run near the seed threshold flickers:
@@ -785,10 +787,14 @@ std::vector<std::size_t> overlappingDuplicates(std::vector<ApparentContour> cons
     quad.push_back(shaftQuad(c));
     area.push_back(std::abs(cv::contourArea(quad.back())));
   }
+  // (a residual that is not finite sorts last: the comparison stays a strict weak order)
+  auto fit = [&](std::size_t i) {
+    double const r = found[i].residual_px;
+    return std::isfinite(r) ? r : std::numeric_limits<double>::infinity();
+  };
   std::vector<std::size_t> order(found.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t a, std::size_t b) { return found[a].residual_px < found[b].residual_px; });
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return fit(a) < fit(b); });
   std::vector<std::size_t> kept, out;
   for (std::size_t i : order) {
     bool overlaps = false;

@@ -711,7 +711,9 @@ TEST(ContourLines, SidesSoughtEachWayAtOnceAreTheSameAsOneByOne) {
             EXPECT_EQ(each[i].lines[k], one.lines[k]) << i;
             EXPECT_EQ(each[i].points[k], one.points[k]) << i;
           }
-          if (fitted) EXPECT_EQ(each[i].chains, first.chains) << i;  // taken, not computed again
+          if (fitted) {
+            EXPECT_EQ(each[i].chains, first.chains) << i;  // taken, not computed again
+          }
           found += one.rejection == ContourRejection::kNone;
         }
         EXPECT_GE(found, 1);

@@ -44,9 +44,9 @@ struct StripSearchParams {
   /// wide pass's half-width (ContourLinesParams::coarse_halfwidth_px, 9 px) 1 px narrower at a
   /// time, down to this, until they stay on it (refineStrip(); 0: no retry). In-vivo 78 -> 81 of
   /// 98 shafts found with no more false ones: OP2/img_20 and img_24 (lines 0.4 and 2.1 px from
-  /// the mask's sides; the wide pass had locked onto a tissue edge beyond the shaft's) and OP1/img_06's black shaft (5.2
-  /// px: its lower edge against shadowed tissue). One narrower pass instead (5 px) found the
-  /// first two, 4, 4.5, 5.5 or 6 px only img_24.
+  /// the mask's sides; the wide pass had locked onto a tissue edge beyond the shaft's) and
+  /// OP1/img_06's black shaft (5.2 px: its lower edge against shadowed tissue). One narrower
+  /// pass instead (5 px) found the first two, 4, 4.5, 5.5 or 6 px only img_24.
   double retry_min_halfwidth_px = 3.0;
 };
 
