@@ -1185,13 +1185,10 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
     std::vector<std::vector<cv::Point>> poly{region.boundary};
     cv::fillPoly(reg, poly, 255, cv::LINE_8, 0, -box.tl());
     std::vector<cv::Point> q;
-    for (Eigen::Vector2d const& e : {entry, tip})
-      for (int k = 0; k < 2; ++k) {
-        Eigen::Vector2d const foot = footOnLine(c.lines[k], e);
-        Eigen::Vector2d const ps = toProcessing(foot, scale);
-        q.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
-      }
-    std::swap(q[2], q[3]);
+    for (Eigen::Vector2d const& foot : shaftQuad(c, entry, tip)) {
+      Eigen::Vector2d const ps = toProcessing(foot, scale);
+      q.emplace_back(static_cast<int>(std::lround(ps.x())) - box.x, static_cast<int>(std::lround(ps.y())) - box.y);
+    }
     cv::fillConvexPoly(quad, q, 255);
     // The nearby slab: the same axial extent, four widths to each side. Region pixels beyond the
     // tip or far to the side (a touching or crossing instrument) do not count against the shaft.

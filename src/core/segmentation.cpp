@@ -764,27 +764,15 @@ bool duplicatesAShaft(ApparentContour const& c, std::vector<ApparentContour> con
   return false;
 }
 
-namespace {
-// The quadrilateral between the contour's lines from the feet of its entry to those of its tip.
-std::vector<cv::Point2f> shaftQuad(ApparentContour const& c) {
-  std::vector<cv::Point2f> q;
-  for (Eigen::Vector2d const& e : {c.entry_px, c.tip_px})
-    for (int k = 0; k < 2; ++k) {
-      Eigen::Vector2d const f = footOnLine(c.lines[k], e);
-      q.emplace_back(static_cast<float>(f.x()), static_cast<float>(f.y()));
-    }
-  std::swap(q[2], q[3]);  // around: entry 0, entry 1, tip 1, tip 0
-  std::vector<cv::Point2f> hull;  // (convex as cv::intersectConvexConvex() needs, whatever the lines' convergence)
-  cv::convexHull(q, hull);
-  return hull;
-}
-}  // namespace
-
 std::vector<std::size_t> overlappingDuplicates(std::vector<ApparentContour> const& found) {
   std::vector<std::vector<cv::Point2f>> quad;
   std::vector<double> area;
   for (ApparentContour const& c : found) {
-    quad.push_back(shaftQuad(c));
+    std::vector<cv::Point2f> q;
+    for (Eigen::Vector2d const& f : shaftQuad(c, c.entry_px, c.tip_px))
+      q.emplace_back(static_cast<float>(f.x()), static_cast<float>(f.y()));
+    quad.emplace_back();
+    cv::convexHull(q, quad.back());  // (convex, as cv::intersectConvexConvex() needs, whatever the lines' convergence)
     area.push_back(std::abs(cv::contourArea(quad.back())));
   }
   // (a residual that is not finite sorts last: the comparison stays a strict weak order)

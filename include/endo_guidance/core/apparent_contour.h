@@ -35,6 +35,13 @@ inline Eigen::Vector2d footOnLine(ImageLine const& l, Eigen::Vector2d const& q) 
   return q - l.head<2>() * l.dot(Eigen::Vector3d(q.x(), q.y(), 1.0));
 }
 
+/// The shaft's image between its lines from `from` to `to` (full-res px): the feet of both on
+/// the two lines, in order around it (from on lines[0], from on lines[1], to on lines[1], to on
+/// lines[0]).
+inline std::array<Eigen::Vector2d, 4> shaftQuad(ApparentContour const& c, Eigen::Vector2d const& from, Eigen::Vector2d const& to) {
+  return {footOnLine(c.lines[0], from), footOnLine(c.lines[1], from), footOnLine(c.lines[1], to), footOnLine(c.lines[0], to)};
+}
+
 /// The image of the shaft's axis: the bisector of the two contour lines (their normals point
 /// inward, so l0 - l1 vanishes where the distances to both are equal), normalised.
 inline ImageLine imageAxis(ApparentContour const& c) {
