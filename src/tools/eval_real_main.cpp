@@ -12,6 +12,7 @@
 //   (conditioning, elongation, stability over 4-s blocks). No intrinsics are published: assumed.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -42,20 +43,22 @@ namespace {
 using endo_guidance::tools::detectShaftsHough;
 using endo_guidance::tools::percentile;
 
-// The quadrilateral between the two contour lines from the entry to the tip.
+// The quadrilateral between the two contour lines from the entry to the tip (shaftQuad()), in
+// whole pixels.
 std::vector<cv::Point> shaftPolygon(ApparentContour const& c) {
   std::vector<cv::Point> poly;
-  for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
-    for (int k = 0; k < 2; ++k) {
-      Eigen::Vector2d const f = footOnLine(c.lines[k], q);
-      poly.emplace_back(static_cast<int>(std::lround(f.x())), static_cast<int>(std::lround(f.y())));
-    }
-  std::swap(poly[2], poly[3]);  // entry-left, entry-right, tip-right, tip-left
+  for (Eigen::Vector2d const& f : shaftQuad(c, c.entry_px, c.tip_px))
+    poly.emplace_back(static_cast<int>(std::lround(f.x())), static_cast<int>(std::lround(f.y())));
   return poly;
 }
 
 struct InvivoStats {
   int images = 0, shafts = 0, found = 0, detections = 0, false_shafts = 0;
+  // Shafts found (half of a detection's strip on the mask) whose closest detection's lines are
+  // within kCloseLinePx[k] of the mask's sides (median): the detections that are usable, not
+  // only on the shaft (a strip between a print band and one edge is found, 25 px off).
+  static constexpr std::array<double, 3> kCloseLinePx{2.0, 5.0, 10.0};
+  std::array<int, 3> found_close{};
   std::vector<double> line_median_px;      // per detection matched to a shaft: median distance of the mask's sides
   std::vector<double> line_median_all_px;  // ... of its whole boundary near the lines (ends across the shaft too)
   std::vector<double> all_dist_px;
@@ -123,6 +126,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       if (cv::countNonZero(m) >= min_area) ids.push_back(id);
     st.shafts += static_cast<int>(ids.size());
     std::map<int, bool> found;
+    std::map<int, double> closest;  // per shaft found: the smallest line median among its detections
     for (auto const& c : r.contours) {
       ++st.detections;
       cv::Mat det = cv::Mat::zeros(im.size(), CV_8U);
@@ -192,6 +196,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
       st.line_median_all_px.push_back(d_all.empty() ? 25.0 : percentile(d_all, 0.5));
       st.line_median_px.push_back(d.empty() ? 25.0 : percentile(d, 0.5));
+      closest[best] = closest.count(best) ? std::min(closest[best], st.line_median_px.back()) : st.line_median_px.back();
       if (verbose)
         std::printf("  hit %s/%s id %d: line to mask sides median %.2f px (signed, + = mask inside the lines: %.2f; whole boundary %.2f), residual %.2f px, width %.1f px at the entry, %.1f at the tip\n",
                     f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
@@ -199,6 +204,8 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
                     shaftWidthAt(c, c.entry_px), shaftWidthAt(c, c.tip_px));
     }
     for (int id : ids) st.found += found.count(id) ? 1 : 0;
+    for (auto const& [id, line] : closest)
+      for (std::size_t k = 0; k < InvivoStats::kCloseLinePx.size(); ++k) st.found_close[k] += line <= InvivoStats::kCloseLinePx[k];
     // Why each missed shaft was missed: no seed on it, or the fate of the regions grown from it.
     double const sc = r.scale, so = 0.5 * (r.scale - 1);
     for (int id : ids) {
@@ -252,6 +259,11 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   }
   std::printf("in-vivo stills (%s): %d images, %d shafts (>= %d px of shaft mask)\n", root.c_str(), st.images, st.shafts, min_area);
   std::printf("  shafts found      %d / %d = %.1f %%\n", st.found, st.shafts, 100.0 * st.found / std::max(1, st.shafts));
+  std::printf("  ... with lines within");
+  for (std::size_t k = 0; k < InvivoStats::kCloseLinePx.size(); ++k)
+    std::printf("%s %.0f px: %d (%.1f %%)", k ? "," : "", InvivoStats::kCloseLinePx[k], st.found_close[k],
+                100.0 * st.found_close[k] / std::max(1, st.shafts));
+  std::printf(" (median to the mask's sides, the shaft's closest detection)\n");
   std::printf("  false shafts      %d in %d images = %.3f per image (%d detections)\n", st.false_shafts, st.images,
               static_cast<double>(st.false_shafts) / std::max(1, st.images), st.detections);
   std::printf("  missed shafts by cause:");
