@@ -125,8 +125,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     for (auto const& [id, m] : shafts)
       if (cv::countNonZero(m) >= min_area) ids.push_back(id);
     st.shafts += static_cast<int>(ids.size());
-    std::map<int, bool> found;
-    std::map<int, double> closest;  // per shaft found: the smallest line median among its detections
+    std::map<int, double> found;  // per shaft found: the smallest line median among its detections
     for (auto const& c : r.contours) {
       ++st.detections;
       cv::Mat det = cv::Mat::zeros(im.size(), CV_8U);
@@ -150,7 +149,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
         continue;
       }
       if (std::find(ids.begin(), ids.end(), best) == ids.end()) continue;  // a tiny instance: neither
-      found[best] = true;
+      found.emplace(best, 25.0);  // (25 px: the most a detection counts, below)
       // Boundary of the instance's shaft mask, inside the image and the field of view, between
       // the entry and the tip: each pixel to the nearer contour line. (Where the shaft leaves the
       // view its mask ends on the image border -- the erosion's border counts as mask -- or on
@@ -196,7 +195,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       st.all_dist_px.insert(st.all_dist_px.end(), d.begin(), d.end());
       st.line_median_all_px.push_back(d_all.empty() ? 25.0 : percentile(d_all, 0.5));
       st.line_median_px.push_back(d.empty() ? 25.0 : percentile(d, 0.5));
-      closest[best] = closest.count(best) ? std::min(closest[best], st.line_median_px.back()) : st.line_median_px.back();
+      found[best] = std::min(found[best], st.line_median_px.back());
       if (verbose)
         std::printf("  hit %s/%s id %d: line to mask sides median %.2f px (signed, + = mask inside the lines: %.2f; whole boundary %.2f), residual %.2f px, width %.1f px at the entry, %.1f at the tip\n",
                     f.parent_path().parent_path().filename().c_str(), base.c_str(), best, st.line_median_px.back(),
@@ -204,7 +203,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
                     shaftWidthAt(c, c.entry_px), shaftWidthAt(c, c.tip_px));
     }
     for (int id : ids) st.found += found.count(id) ? 1 : 0;
-    for (auto const& [id, line] : closest)
+    for (auto const& [id, line] : found)
       for (std::size_t k = 0; k < InvivoStats::kCloseLinePx.size(); ++k) st.found_close[k] += line <= InvivoStats::kCloseLinePx[k];
     // Why each missed shaft was missed: no seed on it, or the fate of the regions grown from it.
     double const sc = r.scale, so = 0.5 * (r.scale - 1);
