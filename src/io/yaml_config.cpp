@@ -107,6 +107,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/extend_gate_px", d(S.contours.extend_gate_px)},
       {"segmentation/min_edge_contrast", d(S.contours.min_edge_contrast)},
       {"segmentation/edge_red_green_weight", d(S.contours.edge_red_green_weight)},
+      {"segmentation/brightness_fallback_contrast", d(S.contours.brightness_fallback_contrast)},
       {"segmentation/line_sigma_floor_px", d(S.contours.line_sigma_floor_px)},
       {"segmentation/edge_lobe_floor", d(S.contours.edge_lobe_floor)},
       {"segmentation/min_fill", d(S.contours.min_fill)},
@@ -188,6 +189,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(S.resought_max_widening >= 1.0, "segmentation/resought_max_widening", ">= 1");
   need(S.strip.full_res_outside_quantile >= 0.0 && S.strip.full_res_outside_quantile <= 1.0,
        "segmentation/strip_full_res_outside_quantile", "in [0, 1]");
+  need(S.contours.brightness_fallback_contrast >= 0.0, "segmentation/brightness_fallback_contrast", ">= 0 (grey levels per px; 0: off)");
   need(S.strip.retry_min_halfwidth_px >= 0.0, "segmentation/strip_retry_min_halfwidth_px", ">= 0 (px; 0: no retry)");
   need(S.tracking.detect_every >= 1, "segmentation/detect_every", ">= 1");
   need(S.regions.max_regions >= 1, "segmentation/max_regions", ">= 1");

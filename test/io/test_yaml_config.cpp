@@ -56,6 +56,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                           "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  strip_full_res_outside_quantile: 1.5\n",
                           "segmentation:\n  strip_retry_min_halfwidth_px: -1\n",
+                          "segmentation:\n  brightness_fallback_contrast: -2\n",
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
                           "segmentation:\n  full_search_max_every: 0\n", "segmentation:\n  refused_area_change: 1.5\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
@@ -100,6 +101,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.resought_max_widening, defaults.segmentation.resought_max_widening);
   EXPECT_EQ(shipped.segmentation.contours.extend_max_misses, defaults.segmentation.contours.extend_max_misses);
   EXPECT_EQ(shipped.segmentation.contours.edge_lobe_floor, defaults.segmentation.contours.edge_lobe_floor);
+  EXPECT_EQ(shipped.segmentation.contours.brightness_fallback_contrast, defaults.segmentation.contours.brightness_fallback_contrast);
   EXPECT_EQ(shipped.segmentation.tracking.detect_every, defaults.segmentation.tracking.detect_every);
   EXPECT_EQ(shipped.segmentation.tracking.max_width_change, defaults.segmentation.tracking.max_width_change);
   EXPECT_EQ(shipped.segmentation.tracking.coarse_step_px, defaults.segmentation.tracking.coarse_step_px);
@@ -115,4 +117,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_FALSE(off.segmentation.crossing_seeds);
   EXPECT_EQ(off.segmentation.strip.min_length_ratio, 0.7);
   EXPECT_EQ(off.segmentation.strip_search_max_every, 40);
+  PipelineParams on;
+  io::loadPipelineYaml(write("b.yaml", "segmentation:\n  brightness_fallback_contrast: 8\n"), on);
+  EXPECT_EQ(on.segmentation.contours.brightness_fallback_contrast, 8.0);
 }

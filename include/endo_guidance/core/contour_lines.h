@@ -56,8 +56,9 @@ struct ContourLinesParams {
                                   ///< (< 0: the window; the wide pass always takes the window)
   double edge_red_green_weight = 0.0;  ///< w of edgeChannel(): 0 locates the edges in the chroma alone (opt-in: README, Accuracy)
   double brightness_fallback_contrast = 0.0;  ///< grey levels per px: a profile without a chroma edge
-                                              ///< takes a brightness drop this steep (0: never; 8 found
-                                              ///< 1 more in-vivo shaft but cost 0.25 px of line accuracy)
+                                              ///< takes a brightness drop this steep (0: never; opt-in:
+                                              ///< 8 finds 1 more in-vivo shaft and 1 more false one,
+                                              ///< robotic Dataset 2 -2 shafts: README, Known limits)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
   int extend_max_misses = 40;     ///< a refined line is followed beyond its region side until this many
                                   ///< profiles in a row give no edge on it (40: 80 px of occlusion, an
