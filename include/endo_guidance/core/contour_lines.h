@@ -58,7 +58,7 @@ struct ContourLinesParams {
   double brightness_fallback_contrast = 0.0;  ///< grey levels per px: a profile without a chroma edge
                                               ///< takes a brightness drop this steep (0: never; opt-in:
                                               ///< 8 finds 1 more in-vivo shaft and 1 more false one,
-                                              ///< robotic Dataset 2 -2 shafts: README, Known limits)
+                                              ///< robotic Dataset 2 -1 shaft: README, Known limits)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
   int extend_max_misses = 40;     ///< a refined line is followed beyond its region side until this many
                                   ///< profiles in a row give no edge on it (40: 80 px of occlusion, an
