@@ -54,11 +54,11 @@ struct ContourLinesParams {
   double edge_lobe_floor = 0.05;  ///< final pass: an edge is the centroid of its slope's lobe down to this fraction
                                   ///< of the peak (within +-2.5 px), not of every descent in the window
                                   ///< (< 0: the window; the wide pass always takes the window)
-  double edge_red_green_weight = 0.0;  ///< w of edgeChannel(): 0 locates the edges in the chroma alone (opt-in: README, Accuracy)
+  double edge_red_green_weight = 0.0;  ///< w of edgeChannel(): 0 locates the edges in the chroma alone (opt-in: docs/known-limits.md)
   double brightness_fallback_contrast = 0.0;  ///< grey levels per px: a profile without a chroma edge
                                               ///< takes a brightness drop this steep (0: never; opt-in:
                                               ///< 8 finds 1 more in-vivo shaft and 1 more false one,
-                                              ///< robotic Dataset 2 -1 shaft: README, Known limits)
+                                              ///< robotic Dataset 2 -1 shaft: docs/known-limits.md)
   int min_edge_points = 8;        ///< sub-pixel edge points per line
   int extend_max_misses = 40;     ///< a refined line is followed beyond its region side until this many
                                   ///< profiles in a row give no edge on it (40: 80 px of occlusion, an

@@ -17,7 +17,7 @@ struct ContourTrackingParams {
   /// Frames: the full detection (seeds, regions, line pairs) runs this often; in the frames
   /// between, each shaft found is refined directly from its lines of the frame before. A shaft
   /// that cannot be followed makes that frame a detection frame at once. 1 (default): detect
-  /// every frame. 4 makes the pipeline about 1.65x faster (see the README for its accuracy):
+  /// every frame. 4 makes the pipeline about 1.65x faster (see docs/performance.md for its accuracy):
   /// opt-in.
   int detect_every = 1;
   double max_width_change = 0.25;  ///< the shaft's width at the entry may change this much (relative, plus 2 px) per frame

@@ -34,7 +34,7 @@ struct SegmentationParams {
   /// full search, and its run keep its width: else it is searched in full at once (something
   /// entered or left). Robotic Dataset 2: 4.5x -> 3.2x an HSV conversion, its false shafts 0.07
   /// -> 0.03 per frame (tissue creases accepted at some of their full searches); every other
-  /// evaluation unchanged (0.2 and 0.5 lost one shaft of the hard rendered scene, README).
+  /// evaluation unchanged (0.2 and 0.5 lost one shaft of the hard rendered scene, docs/performance.md).
   int full_search_max_every = 20;
   double refused_area_change = 0.3;  ///< fraction of the larger area (see full_search_max_every)
   /// A shaft's sides sought again after the first pair had no edges (fitSides() SideSearch), or
