@@ -105,6 +105,7 @@ void SegmentationNodelet::onInit() {
   c.max_residual_px = S.contours.max_residual_px;
   c.min_edge_contrast = S.contours.min_edge_contrast;
   c.edge_red_green_weight = S.contours.edge_red_green_weight;
+  c.brightness_fallback_contrast = S.contours.brightness_fallback_contrast;
   c.min_fill = S.contours.min_fill;
   c.min_elongation = S.contours.min_elongation;
   c.max_widening = S.contours.max_widening;
@@ -164,6 +165,7 @@ void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   S.contours.max_residual_px = c.max_residual_px;
   S.contours.min_edge_contrast = c.min_edge_contrast;
   S.contours.edge_red_green_weight = c.edge_red_green_weight;
+  S.contours.brightness_fallback_contrast = c.brightness_fallback_contrast;
   S.contours.min_fill = c.min_fill;
   S.contours.min_elongation = c.min_elongation;
   S.contours.max_widening = c.max_widening;

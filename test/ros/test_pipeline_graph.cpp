@@ -444,6 +444,18 @@ TEST_F(Graph, DynamicReconfigureTakesTheBreathingPeriod) {
   EXPECT_EQ(set(4.0), 4.0);
 }
 
+// The opt-in brightness fallback of the contour lines (segmentation/brightness_fallback_contrast)
+// is tunable at run time like the other edge thresholds; out-of-range values are clamped.
+TEST_F(Graph, DynamicReconfigureTakesTheBrightnessFallback) {
+  ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
+  auto set = [](double contrast) {
+    return setParameter("endoscope/segmentation", "brightness_fallback_contrast", contrast, &dynamic_reconfigure::Config::doubles);
+  };
+  EXPECT_EQ(set(8.0), 8.0);
+  EXPECT_EQ(set(-3.0), 0.0);
+  EXPECT_EQ(set(0.0), 0.0);
+}
+
 // Services: freeze keeps a trocar where it is; reset forgets them.
 TEST_F(Graph, ResetAndFreezeServices) {
   SyntheticScene scene(defaultInstruments(), so_);
