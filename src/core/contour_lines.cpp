@@ -843,17 +843,8 @@ SideChains sideChains(Region const& region, FieldOfView const& fov, ContourLines
   auto& border = sc.border;
   auto& chain = sc.chain;
   // Boundary points on (near) the FOV edge belong to the entry, not to a contour line.
-  auto onBorder = [&](cv::Point const& q) {
-    int const m = p.border_margin;
-    for (cv::Point const d : {cv::Point(m, 0), cv::Point(-m, 0), cv::Point(0, m), cv::Point(0, -m)}) {
-      cv::Point const r = q + d;
-      if (r.x < 0 || r.y < 0 || r.x >= fov.mask.cols || r.y >= fov.mask.rows || fov.mask.at<std::uint8_t>(r) == 0)
-        return true;
-    }
-    return false;
-  };
   border.resize(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) border[i] = onBorder(B[i]);
+  for (int i = 0; i < n; ++i) border[i] = nearViewEdge(fov, B[i], p.border_margin);
   // A region that meets the border in several places has merged with another instrument.
   int runs = 0;
   for (int i = 0; i < n; ++i) runs += border[i] && !border[(i + n - 1) % n];

@@ -98,4 +98,12 @@ std::optional<Eigen::Vector2d> walkToEdge(FieldOfView const& fov, Eigen::Vector2
   return p;
 }
 
+bool nearViewEdge(FieldOfView const& fov, cv::Point q, int margin) {
+  for (cv::Point const d : {cv::Point(margin, 0), cv::Point(-margin, 0), cv::Point(0, margin), cv::Point(0, -margin)}) {
+    cv::Point const r = q + d;
+    if (r.x < 0 || r.y < 0 || r.x >= fov.mask.cols || r.y >= fov.mask.rows || fov.mask.at<std::uint8_t>(r) == 0) return true;
+  }
+  return false;
+}
+
 }  // namespace endo_guidance::core

@@ -96,12 +96,20 @@ SegmentationParams const& checked(SegmentationParams const& p) {
   if (p.processing_width <= 0) throw std::invalid_argument("segmentation: processing_width must be positive");
   return p;
 }
+// The learned detector's network for p: `current` when it is still the one p asks for.
+std::shared_ptr<ShaftNet> networkFor(SegmentationParams const& p, SegmentationParams const& old, std::shared_ptr<ShaftNet> current) {
+  if (p.detector != SegmentationParams::Detector::kLearned) return nullptr;
+  if (current && p.learned.model == old.learned.model && p.learned.threads == old.learned.threads) return current;
+  return std::make_shared<ShaftNet>(p.learned.model, p.learned.threads);
+}
 }  // namespace
 
-InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params) : params_(checked(params)), colour_(params.feature) {}
+InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params)
+    : params_(checked(params)), colour_(params.feature), net_(networkFor(params, params, nullptr)) {}
 
 void InstrumentSegmenter::setParams(SegmentationParams const& p) {
   checked(p);
+  net_ = networkFor(p, params_, net_);
   bool const new_colour = p.feature.hue_origin_deg != params_.feature.hue_origin_deg || p.feature.gain != params_.feature.gain;
   params_ = p;
   if (new_colour) colour_ = ColourFeature(p.feature);
@@ -169,12 +177,8 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
   res.scale = scale;
   reduceImage(bgr, scale, small_);  // (image_reduction.h)
-  if (small_.size() != fov_size_ || ++frames_since_fov_ >= params_.fov_refresh) {
-    fov_ = detectFieldOfView(small_, params_.fov);
-    fov_size_ = small_.size();
-    fov_area_ = cv::countNonZero(fov_.mask);
-    frames_since_fov_ = 0;
-  }
+  updateFieldOfView();
+  if (net_) return detectLearned(bgr, scale);
   colour_.compute(small_, raw_);
   sigmaFilter(raw_, filtered_, params_.sigma_radius, params_.sigma_delta);
   // Trocar images in processing pixels (homogeneous: some lie at infinity).
@@ -581,21 +585,95 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
     memory_now.push_back(std::move(c));
   }
   memory_ = std::move(memory_now);
-  // The shafts found are followed in the next frames (contour_tracking.h).
-  tracked_.clear();
-  tracked_memory_.clear();
   // Only shafts confirmed by two detections in a row are tracked: a new one (or a tissue band
   // found in some frames only) makes the next frame a detection frame too, so that a false
   // shaft is not held for detect_every frames (robotic Dataset 2 with detect_every 4: 0.20 ->
   // 0.07 false per frame, as when detecting every frame; it costs ~15 % more detection frames).
-  if (params_.tracking.detect_every > 1 && all_confirmed)
+  startTracks(res, all_confirmed, bgr, contour_memory);
+  return res;
+}
+
+void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr,
+                                      std::vector<std::size_t> const& memory) {
+  // The shafts found are followed in the next frames (contour_tracking.h).
+  tracked_.clear();
+  tracked_memory_.clear();
+  if (follow && params_.tracking.detect_every > 1)
     for (std::size_t i = 0; i < res.contours.size(); ++i) {
       tracked_.push_back(startTrack(res.contours[i], res.edges[i], bgr, params_.tracking));
-      tracked_memory_.push_back(contour_memory[i]);
+      tracked_memory_.push_back(i < memory.size() ? memory[i] : std::numeric_limits<std::size_t>::max());
     }
   tracked_size_ = bgr.size();
-  scale_ = scale;
+  scale_ = res.scale;
   since_detection_ = 0;
+}
+
+void InstrumentSegmenter::updateFieldOfView() {
+  if (small_.size() == fov_size_ && ++frames_since_fov_ < params_.fov_refresh) return;
+  fov_ = detectFieldOfView(small_, params_.fov);
+  fov_size_ = small_.size();
+  fov_area_ = cv::countNonZero(fov_.mask);
+  frames_since_fov_ = 0;
+}
+
+// The learned detector: the network's shaft-mask components (proposeShaftRegions()) through the
+// same contour fit as the grown regions (fitSides(), each side search in turn, refineContour()),
+// the same glare check and duplicate removal.
+SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int scale) {
+  SegmentationResult res;
+  res.scale = scale;
+  cv::Mat const prob = net_->shaftProbability(bgr);
+  res.regions = proposeShaftRegions(prob, fov_, params_.learned, params_.contours.border_margin);
+  static std::vector<SideSearch> const kSearches{SideSearch::kFromEntry, SideSearch::kParallelFirst, SideSearch::kParallelSecond,
+                                                 SideSearch::kStretchPair};
+  std::vector<std::size_t> contour_region;
+  labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
+  for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
+    Region const& region = res.regions[ri];
+    ContourRejection why = ContourRejection::kTooFewPoints;
+    std::optional<ContourFit> fit;
+    if (static_cast<int>(res.contours.size()) < params_.regions.max_regions)
+      for (SideFit const& sides : fitSidesEach(region, fov_, scale, params_.contours, kSearches)) {
+        if (sides.rejection != ContourRejection::kNone) {
+          why = sides.rejection;
+          continue;
+        }
+        ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
+        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
+        else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
+        if (f.contour && f.rejection == ContourRejection::kNone) {
+          fit = std::move(f);
+          break;
+        }
+        why = f.rejection;
+      }
+    res.region_status.push_back(fit ? ContourRejection::kNone : why);
+    if (!fit) continue;
+    ApparentContour c = *fit->contour;
+    ImageLine const ax = imageAxis(c);  // reported on the image axis, as the colour method's
+    c.entry_px = footOnLine(ax, c.entry_px);
+    c.tip_px = footOnLine(ax, c.tip_px);
+    res.contours.push_back(c);
+    res.edges.push_back(fit->edges);
+    contour_region.push_back(ri);
+    cv::drawContours(labels_, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(static_cast<int>(res.contours.size())),
+                     cv::FILLED);
+  }
+  auto drop = [&](std::vector<std::size_t> const& dup) {
+    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
+      res.region_status[contour_region[*it]] = ContourRejection::kDuplicate;
+      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(*it));
+      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(*it));
+      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(*it));
+    }
+  };
+  drop(narrowerDuplicates(res.contours));
+  drop(overlappingDuplicates(res.contours));
+  // The feature image for overlays: low on shafts, as the colour feature.
+  cv::Mat p;
+  cv::resize(prob, p, fov_.mask.size(), 0, 0, cv::INTER_LINEAR);
+  p.convertTo(filtered_, CV_8U, -255.0, 255.0);
+  startTracks(res, true, bgr, {});
   return res;
 }
 

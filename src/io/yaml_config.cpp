@@ -71,6 +71,16 @@ void loadPipelineYaml(std::string const& path, PipelineParams& p) {
   throw std::runtime_error("parameters YAML '" + path + "': unknown keys:" + list);
 }
 
+core::SegmentationParams::Detector detectorFromString(std::string const& name) {
+  if (name == "colour") return core::SegmentationParams::Detector::kColour;
+  if (name == "learned") return core::SegmentationParams::Detector::kLearned;
+  throw std::runtime_error("pipeline parameters: segmentation/detector must be 'colour' or 'learned', not '" + name + "'");
+}
+
+char const* toString(core::SegmentationParams::Detector d) {
+  return d == core::SegmentationParams::Detector::kLearned ? "learned" : "colour";
+}
+
 std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& p) {
   // key -> setter. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
   using Setter = std::function<void(YAML::Node const&)>;
@@ -78,11 +88,17 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   auto i = [](int& x) { return Setter([&x](YAML::Node const& n) { x = n.as<int>(); }); };
   auto b = [](bool& x) { return Setter([&x](YAML::Node const& n) { x = n.as<bool>(); }); };
   auto z = [](std::size_t& x) { return Setter([&x](YAML::Node const& n) { x = n.as<std::size_t>(); }); };
+  auto str = [](std::string& x) { return Setter([&x](YAML::Node const& n) { x = n.as<std::string>(); }); };
   auto& S = p.segmentation;
   auto& T = p.insertion_points;
   std::map<std::string, Setter> const keys{
       {"radius", d(p.radius)},
       {"reject_unattached", b(p.reject_unattached)},
+      {"segmentation/detector", Setter([&S](YAML::Node const& n) { S.detector = detectorFromString(n.as<std::string>()); })},
+      {"segmentation/learned_model", str(S.learned.model)},
+      {"segmentation/learned_threads", i(S.learned.threads)},
+      {"segmentation/learned_shaft_probability", d(S.learned.shaft_probability)},
+      {"segmentation/learned_min_area", i(S.learned.min_area)},
       {"segmentation/processing_width", i(S.processing_width)},
       {"segmentation/hue_origin_deg", d(S.feature.hue_origin_deg)},
       {"segmentation/sigma_radius", i(S.sigma_radius)},
@@ -175,6 +191,9 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
     if (!ok) throw std::runtime_error(std::string("pipeline parameters: ") + key + " must be " + what);
   };
   need(p.radius > 0.0 && p.radius < 0.05, "radius", "in (0, 0.05) m");
+  need(S.learned.threads >= 1 && S.learned.threads <= 64, "segmentation/learned_threads", "in [1, 64]");
+  need(S.learned.shaft_probability > 0.0 && S.learned.shaft_probability < 1.0, "segmentation/learned_shaft_probability", "in (0, 1)");
+  need(S.learned.min_area >= 1, "segmentation/learned_min_area", ">= 1 px");
   need(S.processing_width >= 32, "segmentation/processing_width", ">= 32 px");
   need(S.sigma_radius >= 0 && S.sigma_radius <= 8, "segmentation/sigma_radius", "in [0, 8]");
   need(S.sigma_delta >= 0 && S.sigma_delta <= 255, "segmentation/sigma_delta", "in [0, 255]");

@@ -77,7 +77,13 @@ void SegmentationNodelet::onInit() {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
     params_ = core::PipelineParams{};
   }
-  segmenter_.setParams(params_.segmentation);
+  try {
+    segmenter_.setParams(params_.segmentation);  // (loads the learned detector's model)
+  } catch (std::exception const& e) {
+    NODELET_FATAL_STREAM("cannot start: " << e.what());
+    ros::requestShutdown();
+    return;
+  }
   tracker_.setParams(params_.tracking);
   double expected_rate = 0.0;
   pnh_.param("expected_rate", expected_rate, 0.0);

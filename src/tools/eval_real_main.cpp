@@ -24,6 +24,7 @@
 #include <opencv2/videoio.hpp>
 #include <sstream>
 #include <string>
+#include <tuple>
 
 #include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/core/insertion_point.h"
@@ -31,6 +32,7 @@
 #include "endo_guidance/core/insertion_point_tracker.h"
 #include "endo_guidance/core/pipeline.h"
 #include "hough_baseline.h"
+#include "shaft_scoring.h"
 #include "tool_util.h"
 #include "endo_guidance/core/segmentation.h"
 
@@ -42,6 +44,11 @@ namespace {
 
 using endo_guidance::tools::detectShaftsHough;
 using endo_guidance::tools::percentile;
+using endo_guidance::tools::kFoundPx;
+using endo_guidance::tools::MaskShaft;
+using endo_guidance::tools::maskShaft;
+using endo_guidance::tools::scoreStrict;
+using endo_guidance::tools::StrictScore;
 
 // The quadrilateral between the two contour lines from the entry to the tip (shaftQuad()), in
 // whole pixels.
@@ -66,23 +73,40 @@ struct InvivoStats {
 };
 
 bool verbose = false;
+constexpr int kSkipped = 77;            // exit status when the data is absent (ctest SKIP_RETURN_CODE)
+constexpr int kStrictMinPx = 300;        // in-vivo: a mask shaft is an instance with this much class 160
+constexpr int kStrictRoboticMinPx = 500; // robotic: one shaft per connected component of this much
 bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
 
 struct InvivoChecks {
   double min_found = -1.0, max_line_px = -1.0, max_false_per_image = -1.0;
+  double min_strict_found = -1.0, max_strict_false_per_image = -1.0;  // strict scoring (shaft_scoring.h), at 10 px
 };
+
+// The strict scoring's summary lines for one set of frames.
+void printStrict(char const* what, StrictScore const& s, int frames, char const* per) {
+  std::printf("  %s: %d shafts, found", what, s.shafts);
+  for (std::size_t k = 0; k < kFoundPx.size(); ++k)
+    std::printf("%s %.1f %% (<= %.0f px)", k ? "," : "", 100.0 * s.found[k] / std::max(1, s.shafts), kFoundPx[k]);
+  std::printf("; %d false = %.3f per %s; side median to its line: median %.2f px, p90 %.2f px\n", s.false_detections,
+              static_cast<double>(s.false_detections) / std::max(1, frames), per, percentile(s.side_median_px, 0.5),
+              percentile(s.side_median_px, 0.9));
+}
 
 // Returns false when a requested regression bound is violated.
 bool evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area,
-                InvivoChecks const& chk) {
+                InvivoChecks const& chk, std::vector<std::string> const& sites) {
   InvivoStats st;
+  std::map<std::string, StrictScore> strict;  // per operation
+  std::map<std::string, int> strict_images;
   std::vector<fs::path> files;
-  for (std::string op : {"OP1", "OP2"}) {
+  for (std::string const& op : sites) {
     fs::path const raw = root / op / "Raw";
     if (!fs::exists(raw)) continue;
     for (auto const& e : fs::directory_iterator(raw)) files.push_back(e.path());
   }
   std::sort(files.begin(), files.end());
+  InstrumentSegmenter seg(sp);
   for (auto const& f : files) {
     cv::Mat const im = cv::imread(f.string(), cv::IMREAD_COLOR);
     std::string name = f.filename().string();
@@ -94,7 +118,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       continue;
     }
     ++st.images;
-    InstrumentSegmenter seg(sp);  // stills: no temporal state
+    seg.reset();  // stills: no temporal state
     SegmentationResult r = seg.process(im);
     if (baseline) {
       r.contours = detectShaftsHough(im);
@@ -124,6 +148,20 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     std::vector<int> ids;
     for (auto const& [id, m] : shafts)
       if (cv::countNonZero(m) >= min_area) ids.push_back(id);
+    // Strict scoring: every instance with kStrictMinPx of shaft mask, its sides against the lines.
+    {
+      std::vector<MaskShaft> ms;
+      cv::Mat const jaws = cls == 70;
+      for (auto const& [id, m] : shafts)
+        if (cv::countNonZero(m) >= kStrictMinPx) ms.push_back(maskShaft(m, jaws));
+      std::string const op = f.parent_path().parent_path().filename().string();
+      StrictScore const sc = scoreStrict(ms, r.contours);
+      strict[op] += sc;
+      ++strict_images[op];
+      if (verbose)
+        for (std::size_t i = 0; i < ms.size(); ++i)
+          if (sc.match[i] < 0) std::printf("  strict miss %s/%s: a shaft of %d px\n", op.c_str(), base.c_str(), ms[i].pixels);
+    }
     st.shafts += static_cast<int>(ids.size());
     std::map<int, double> found;  // per shaft found: the smallest line median among its detections
     for (auto const& c : r.contours) {
@@ -273,17 +311,34 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
               percentile(st.line_median_px, 0.5), percentile(st.line_median_px, 0.9), percentile(st.all_dist_px, 0.5), percentile(st.all_dist_px, 0.95));
   std::printf("  (to the mask's whole boundary near the lines, its ends across the shaft too: median of per-detection medians %.2f px)\n",
               percentile(st.line_median_all_px, 0.5));
+  std::printf("  strict scoring (mask shafts of >= %d px; each side's median distance to its line):\n", kStrictMinPx);
+  StrictScore all;
+  int all_images = 0;
+  for (auto const& [op, sc] : strict) {
+    printStrict(op.c_str(), sc, strict_images[op], "image");
+    all += sc;
+    all_images += strict_images[op];
+  }
+  printStrict("all", all, all_images, "image");
   bool ok = true;
+  double const strict_found = static_cast<double>(all.found.back()) / std::max(1, all.shafts);
+  double const strict_fpi = static_cast<double>(all.false_detections) / std::max(1, all_images);
+  if (chk.min_strict_found >= 0.0 && !(strict_found >= chk.min_strict_found)) ok = false;
+  if (chk.max_strict_false_per_image >= 0.0 && !(strict_fpi <= chk.max_strict_false_per_image)) ok = false;
+  if (chk.min_strict_found >= 0.0 || chk.max_strict_false_per_image >= 0.0)
+    std::printf("  strict regression bounds (found >= %.2f, false/image <= %.3f): %s\n", chk.min_strict_found,
+                chk.max_strict_false_per_image, ok ? "met" : "VIOLATED");
   double const found = static_cast<double>(st.found) / std::max(1, st.shafts);
   double const fpi = static_cast<double>(st.false_shafts) / std::max(1, st.images);
   double const line = percentile(st.line_median_px, 0.5);
-  if (chk.min_found >= 0.0 && !(found >= chk.min_found)) ok = false;
-  if (chk.max_line_px >= 0.0 && !(line <= chk.max_line_px)) ok = false;
-  if (chk.max_false_per_image >= 0.0 && !(fpi <= chk.max_false_per_image)) ok = false;
+  bool old_ok = true;
+  if (chk.min_found >= 0.0 && !(found >= chk.min_found)) old_ok = false;
+  if (chk.max_line_px >= 0.0 && !(line <= chk.max_line_px)) old_ok = false;
+  if (chk.max_false_per_image >= 0.0 && !(fpi <= chk.max_false_per_image)) old_ok = false;
   if (chk.min_found >= 0.0 || chk.max_line_px >= 0.0 || chk.max_false_per_image >= 0.0)
     std::printf("  regression bounds (found >= %.2f, line <= %.2f px, false/image <= %.3f): %s\n", chk.min_found,
-                chk.max_line_px, chk.max_false_per_image, ok ? "met" : "VIOLATED");
-  return ok;
+                chk.max_line_px, chk.max_false_per_image, old_ok ? "met" : "VIOLATED");
+  return ok && old_ok;
 }
 
 // Each tool's trocar from the axes of its own detections (the annotation says which tool a
@@ -339,6 +394,48 @@ void reportToolTrocars(std::map<int, std::vector<PluckerLine>> const& tool_axes,
   }
 }
 
+// Robotic masks: each frame's pixels snapped to 0 / 70 / 160; one mask shaft per connected
+// component of class 160 with kStrictRoboticMinPx, scored strictly against the detections.
+StrictScore scoreRoboticMasks(std::vector<cv::Mat> const& masks, std::vector<ApparentContour> const& detections) {
+  cv::Mat shaft, jaws;
+  for (cv::Mat const& m : masks) {
+    cv::Mat g;
+    cv::cvtColor(m, g, cv::COLOR_BGR2GRAY);
+    cv::Mat const s = g >= 115, j = (g >= 35) & (g < 115);  // nearest of {0, 70, 160}
+    shaft = shaft.empty() ? s : (shaft | s);
+    jaws = jaws.empty() ? j : (jaws | j);
+  }
+  cv::Mat labels, stats, centroids;
+  int const n = cv::connectedComponentsWithStats(shaft, labels, stats, centroids, 8, CV_32S);
+  std::vector<MaskShaft> ms;
+  for (int k = 1; k < n; ++k)
+    if (stats.at<int>(k, cv::CC_STAT_AREA) >= kStrictRoboticMinPx) ms.push_back(maskShaft(labels == k, jaws));
+  return scoreStrict(ms, detections);
+}
+
+// Annotated axes found: a detection's image axis (bisector of its lines) within kAxisFoundPx of
+// both annotated points, each annotation and detection used once (nearest first).
+constexpr double kAxisFoundPx = 40.0;
+template <typename Ann>
+int axesFound(std::vector<Ann> const& annotated, std::vector<ApparentContour> const& detections) {
+  std::vector<std::tuple<double, std::size_t, std::size_t>> pairs;
+  for (std::size_t i = 0; i < annotated.size(); ++i)
+    for (std::size_t j = 0; j < detections.size(); ++j) {
+      ImageLine const l = imageAxis(detections[j]);
+      double const d = std::max(std::abs(l.dot(annotated[i].a.homogeneous())), std::abs(l.dot(annotated[i].b.homogeneous())));
+      if (d <= kAxisFoundPx) pairs.emplace_back(d, i, j);
+    }
+  std::sort(pairs.begin(), pairs.end());
+  std::vector<char> ua(annotated.size()), ud(detections.size());
+  int found = 0;
+  for (auto const& [d, i, j] : pairs)
+    if (!ua[i] && !ud[j]) {
+      ua[i] = ud[j] = 1;
+      ++found;
+    }
+  return found;
+}
+
 // Returns false when a requested regression bound (per sequence) is violated.
 bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp,
                  double min_found, double max_false_per_frame) {
@@ -381,6 +478,12 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     int n = 0, found = 0, frame = 0, dets = 0, frames_annot = 0, false_dets = 0;
     // Mean distance (px) of an annotated axis's two points to an image axis.
     auto offAxis = [](Eigen::Vector3d const& l, Ann const& a) { return 0.5 * (std::abs(l.dot(a.a.homogeneous())) + std::abs(l.dot(a.b.homogeneous()))); };
+    // The mask videos (one per instrument in Dataset 1), read in step with the frames.
+    std::vector<cv::VideoCapture> mask_caps;
+    for (auto const& e : fs::directory_iterator(video.parent_path()))
+      if (e.path().filename().string().find("Segmentation.avi") != std::string::npos) mask_caps.emplace_back(e.path().string());
+    StrictScore strict;
+    int axes_found40 = 0;
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
@@ -390,8 +493,11 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::vector<PluckerLine> all_axes;
     std::map<int, std::vector<PluckerLine>> tool_axes;  // per annotated tool: the 3-D axes of its detections, in time order
     std::map<int, std::vector<ImageLine>> tool_lines;  // ... and their image axes
+    std::vector<cv::Mat> mask_frames(mask_caps.size());
     while (cap.read(im)) {
       if (im.size() != cv::Size(720, 576)) break;
+      bool masks_ok = !mask_caps.empty();
+      for (std::size_t k = 0; k < mask_caps.size(); ++k) masks_ok = mask_caps[k].read(mask_frames[k]) && masks_ok;
       out = pipe.process(im);
       for (auto const& o : out.instruments) all_axes.push_back(o.pose.axis);
       if (frame > 185)
@@ -414,6 +520,8 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             std::printf("  false ds%d frame %d (%s): entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
                         c.entry_px.x(), c.entry_px.y(), c.tip_px.x(), c.tip_px.y());
         }
+        if (masks_ok) strict += scoreRoboticMasks(mask_frames, r.contours);
+        axes_found40 += axesFound(it->second, r.contours);
         for (auto const& a : it->second) {
           ++n;
           Eigen::Vector2d const da = (a.b - a.a).normalized();
@@ -466,6 +574,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                 static_cast<double>(false_dets) / std::max(1, frames_annot));
     std::printf("  image axis vs annotation: mean point distance median %.2f px p90 %.2f px; angle median %.2f deg p90 %.2f deg\n",
                 percentile(dist, 0.5), percentile(dist, 0.9), percentile(ang, 0.5), percentile(ang, 0.9));
+    std::printf("  strict: annotated axes found (a detection's image axis within %.0f px of both annotated points) %d / %d = %.1f %%\n",
+                kAxisFoundPx, axes_found40, n, 100.0 * axes_found40 / std::max(1, n));
+    if (!mask_caps.empty()) printStrict("strict, mask shafts (components of >= 500 px)", strict, frames_annot, "frame");
     double const found_frac = static_cast<double>(found) / std::max(1, n);
     double const false_rate = static_cast<double>(false_dets) / std::max(1, frames_annot);
     if ((min_found >= 0.0 && found_frac < min_found) || (max_false_per_frame >= 0.0 && false_rate > max_false_per_frame)) {
@@ -544,6 +655,8 @@ int main(int argc, char** argv) {
   InvivoChecks chk;
   bool invivo = true, robotic = true;
   double robotic_min_found = -1.0, robotic_max_false = -1.0;
+  std::vector<std::string> sites{"OP1", "OP2", "OP3"};
+  std::string detector, model;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
     if (a == "--data" && i + 1 < argc) data = argv[++i];
@@ -557,12 +670,24 @@ int main(int argc, char** argv) {
     else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
     else if (a == "--robotic-only") invivo = false;
     else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
+    else if (a == "--detector" && i + 1 < argc) detector = argv[++i];
+    else if (a == "--model" && i + 1 < argc) model = argv[++i];
+    else if (a == "--min-strict-found" && i + 1 < argc) chk.min_strict_found = std::atof(argv[++i]);
+    else if (a == "--max-strict-false-per-image" && i + 1 < argc) chk.max_strict_false_per_image = std::atof(argv[++i]);
+    else if (a == "--sites" && i + 1 < argc) {
+      sites.clear();
+      std::stringstream ss(argv[++i]);
+      for (std::string t; std::getline(ss, t, ',');) sites.push_back(t);
+    }
     else if (a == "--robotic-min-found" && i + 1 < argc) robotic_min_found = std::atof(argv[++i]);
     else if (a == "--robotic-max-false-per-frame" && i + 1 < argc) robotic_max_false = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
+                           "       [--detector colour|learned] [--model MODEL.yaml]   (override the parameters' segmentation/detector, learned_model)\n"
+                           "       [--sites OP1,OP2,OP3]   (the in-vivo operations scored; default all three)\n"
+                           "       [--min-strict-found F] [--max-strict-false-per-image F]   (in-vivo, strict scoring at 10 px; exit 1 if violated)\n"
                            "       [--robotic-min-found F] [--robotic-max-false-per-frame F]   (per robotic sequence; exit 1 if violated)\n"
                            "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
       return 2;
@@ -570,7 +695,7 @@ int main(int argc, char** argv) {
   }
   if (!fs::exists(data)) {
     std::printf("SKIPPED: real data folder '%s' absent (it lives in ../shared/data beside the repository)\n", data.c_str());
-    return 0;
+    return kSkipped;
   }
   PipelineParams pp;
   if (!params_path.empty()) {
@@ -581,13 +706,26 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  try {
+    if (!detector.empty()) pp.segmentation.detector = io::detectorFromString(detector);
+    if (!model.empty()) pp.segmentation.learned.model = model;
+    InstrumentSegmenter check(pp.segmentation);  // a model that cannot be loaded: said once, here
+  } catch (std::exception const& e) {
+    std::fprintf(stderr, "endo_guidance_eval_real: %s\n", e.what());
+    return 2;
+  }
+  std::printf("detector: %s%s%s\n", io::toString(pp.segmentation.detector),
+              pp.segmentation.detector == SegmentationParams::Detector::kLearned ? ", model " : "",
+              pp.segmentation.detector == SegmentationParams::Detector::kLearned
+                  ? (pp.segmentation.learned.model.empty() ? defaultShaftModel() : pp.segmentation.learned.model).c_str()
+                  : "");
   SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
   if (baseline && robotic) {
     std::printf("--baseline: the in-vivo stills only (the baseline has no insertion points for the sequences)\n");
     robotic = false;
   }
-  if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk);
+  if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk, sites);
   if (robotic) ok = evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp, robotic_min_found, robotic_max_false) && ok;
   return ok ? 0 : 1;
 }

@@ -91,6 +91,11 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
   EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
   EXPECT_EQ(shipped.segmentation.crossing_seeds, defaults.segmentation.crossing_seeds);
+  EXPECT_EQ(shipped.segmentation.detector, defaults.segmentation.detector);
+  EXPECT_EQ(shipped.segmentation.learned.model, defaults.segmentation.learned.model);
+  EXPECT_EQ(shipped.segmentation.learned.threads, defaults.segmentation.learned.threads);
+  EXPECT_EQ(shipped.segmentation.learned.shaft_probability, defaults.segmentation.learned.shaft_probability);
+  EXPECT_EQ(shipped.segmentation.learned.min_area, defaults.segmentation.learned.min_area);
   EXPECT_EQ(shipped.segmentation.level_memory_px, defaults.segmentation.level_memory_px);
   EXPECT_EQ(shipped.segmentation.full_search_every, defaults.segmentation.full_search_every);
   EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
@@ -120,4 +125,20 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   PipelineParams on;
   io::loadPipelineYaml(write("b.yaml", "segmentation:\n  brightness_fallback_contrast: 8\n"), on);
   EXPECT_EQ(on.segmentation.contours.brightness_fallback_contrast, 8.0);
+}
+
+// The detector switch: read, spelled out in errors, its learned parameters validated.
+TEST(YamlConfig, DetectorSwitch) {
+  PipelineParams p;
+  io::loadPipelineYaml(write("d.yaml", "segmentation:\n  detector: learned\n  learned_model: /x/m.yaml\n  learned_threads: 2\n"), p);
+  EXPECT_EQ(p.segmentation.detector, SegmentationParams::Detector::kLearned);
+  EXPECT_EQ(p.segmentation.learned.model, "/x/m.yaml");
+  EXPECT_EQ(p.segmentation.learned.threads, 2);
+  EXPECT_STREQ(io::toString(p.segmentation.detector), "learned");
+  io::loadPipelineYaml(write("c.yaml", "segmentation:\n  detector: colour\n"), p);
+  EXPECT_EQ(p.segmentation.detector, SegmentationParams::Detector::kColour);
+  PipelineParams q;
+  EXPECT_THROW(io::loadPipelineYaml(write("e.yaml", "segmentation:\n  detector: hough\n"), q), std::runtime_error);
+  EXPECT_THROW(io::loadPipelineYaml(write("t.yaml", "segmentation:\n  learned_threads: 0\n"), q), std::runtime_error);
+  EXPECT_THROW(io::loadPipelineYaml(write("q.yaml", "segmentation:\n  learned_shaft_probability: 1.5\n"), q), std::runtime_error);
 }

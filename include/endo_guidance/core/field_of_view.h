@@ -38,6 +38,9 @@ Eigen::Vector2d depthGradient(FieldOfView const& fov, cv::Point p);
 /// The distance (px) to the area's edge at the pixel nearest to x (processing px, clamped to the
 /// image); 0 when `depth` is empty.
 double depthAt(FieldOfView const& fov, Eigen::Vector2d const& x);
+/// Whether pixel q lies within `margin` px (along a row or a column) of the area's edge or the
+/// image's: the boundary points of a region there are its entry, not a side of a shaft.
+bool nearViewEdge(FieldOfView const& fov, cv::Point q, int margin);
 /// Whether the pixel nearest to x (processing px) is inside the area.
 bool insideView(FieldOfView const& fov, Eigen::Vector2d const& x);
 

@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 #include <deque>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -12,6 +13,7 @@
 #include "endo_guidance/core/contour_lines.h"
 #include "endo_guidance/core/contour_tracking.h"
 #include "endo_guidance/core/field_of_view.h"
+#include "endo_guidance/core/learned_shaft_detector.h"
 #include "endo_guidance/core/region_growing.h"
 #include "endo_guidance/core/seed_search.h"
 #include "endo_guidance/core/strip_search.h"
@@ -60,6 +62,12 @@ struct SegmentationParams {
   /// border (the part that does may be merged with a blob, or too short). Searched as the
   /// border is, in the field of view less that shaft; pairs checked as re-sought ones.
   bool crossing_seeds = true;
+  /// What proposes the shaft candidates that the contour fit turns into lines: the colour method
+  /// ([Doignon07] Sec. 3: seeds on the view's border, region growing, strip search) or the
+  /// learned shaft mask (learned_shaft_detector.h). docs/accuracy.md compares them.
+  enum class Detector { kColour, kLearned };
+  Detector detector = Detector::kColour;
+  LearnedDetectorParams learned;
   ColourFeatureParams feature;
   FieldOfViewParams fov;
   SeedSearchParams seeds;
@@ -96,10 +104,13 @@ struct SegmentationResult {
 /// stream); call reset() between unrelated images.
 class InstrumentSegmenter {
  public:
+  /// With the learned detector, its model is loaded here: std::runtime_error if it cannot be.
   explicit InstrumentSegmenter(SegmentationParams const& params = {});
   /// Segments one BGR frame. `trocar_images`: homogeneous images of the known insertion points
   /// in full-resolution pixels ([Doignon07] Sec. 4), focusing the seed search; may be empty.
   SegmentationResult process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocar_images = {});
+  /// (Loads the learned detector's model when it is selected and its path or threads changed:
+  /// std::runtime_error if it cannot be, the old parameters kept.)
   void setParams(SegmentationParams const& p);
   /// Forgets the previous frames (tracked shafts, seed memory, field of view).
   void reset();
@@ -144,6 +155,11 @@ class InstrumentSegmenter {
                         std::vector<int> const& strip_labels, std::deque<FieldOfView>& views, std::vector<int>& view_shafts,
                         std::vector<int>& seed_view) const;
   std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
+  void updateFieldOfView();  // on small_, every fov_refresh frames or when its size changes
+  SegmentationResult detectLearned(cv::Mat const& bgr, int scale);  // the learned detector's frame
+  // Follows res's shafts in the next frames when `follow` (contour tracking on); memory: per shaft, its seed's entry.
+  void startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr, std::vector<std::size_t> const& memory);
+  std::shared_ptr<ShaftNet> net_;  // the learned detector's network (Detector::kLearned)
   RegionGrower grower_;
   std::vector<Memory> memory_;
   std::vector<TrackedShaft> tracked_;  // the shafts of the last frame, to follow

@@ -34,6 +34,9 @@ CameraModel loadCameraYaml(std::string const& path);
 /// Overrides fields of `params` with the keys present in a pipeline YAML (see config/pipeline.yaml;
 /// unknown keys are an error, listed in the exception, so a typo is not silently ignored).
 void loadPipelineYaml(std::string const& path, PipelineParams& params);
+/// segmentation/detector's values: "colour" or "learned" (std::runtime_error otherwise).
+core::SegmentationParams::Detector detectorFromString(std::string const& name);
+char const* toString(core::SegmentationParams::Detector d);
 
 }  // namespace endo_guidance::io
 

@@ -1,0 +1,321 @@
+#!/usr/bin/env python3
+# Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+"""Trains the learned shaft mask (background / shaft / jaws per pixel) on the CPU and exports it
+to ONNX for OpenCV's DNN module (perception/learned_shaft_detector.h).
+
+Data (read from ../shared/data, never copied): the EndoVis'15 rigid in-vivo stills (OP1-OP3,
+class masks 0 / 70 jaws / 160 shaft) and the robotic sequences' mask videos (DS1, DS2; every
+5th frame, pixels snapped to {0, 70, 160}). Heavy augmentation: scale, rotation, flips, colour
+cast, brightness, blur, noise, JPEG, specular spots, circular or side-bar views.
+
+  train_shaft_net.py --out DIR [--hold-out OP1|OP2|OP3|DS1|DS2] [--epochs N] [--seed S]
+
+writes DIR/shaft_net.onnx and DIR/shaft_net.yaml (input size, normalisation, classes, the
+training's held-out pixel IoU). --reference FRAME.png also writes the network's output on that
+frame beside the model (shaft_net_reference.yml.gz), for the C++ test of the OpenCV runtime.
+"""
+import argparse
+import os
+import sys
+import time
+
+import cv2
+import numpy as np
+
+try:
+    import torch
+    import torch.nn as nn
+    import torch.nn.functional as F
+except ImportError:
+    sys.exit("train_shaft_net.py: PyTorch is missing (Debian: apt-get install python3-torch python3-onnx)")
+
+NET_W, NET_H = 160, 128          # network input (any frame is resized to it)
+STORE_W, STORE_H = 320, 256      # training images are kept at twice the input, augmented, then reduced
+CLASSES = ("background", "shaft", "jaws")
+MEAN, SCALE = 127.5, 1.0 / 127.5  # input = (BGR - MEAN) * SCALE
+
+
+def snap(mask):
+    """Mask grey levels to class indices: nearest of 0 (background), 160 (shaft), 70 (jaws)."""
+    m = mask.astype(np.int16)
+    d = np.stack([np.abs(m - 0), np.abs(m - 160), np.abs(m - 70)])
+    return np.argmin(d, axis=0).astype(np.uint8)
+
+
+def load_sites(data):
+    """{site: [(bgr, labels)]} at STORE size."""
+    sites = {}
+    root = os.path.join(data, "endovis15_rigid_invivo")
+    for op in ("OP1", "OP2", "OP3"):
+        raw = os.path.join(root, op, "Raw")
+        if not os.path.isdir(raw):
+            continue
+        items = []
+        for f in sorted(os.listdir(raw)):
+            im = cv2.imread(os.path.join(raw, f), cv2.IMREAD_COLOR)
+            cls = cv2.imread(os.path.join(root, op, "Masks", f.replace("_raw", "_class")), cv2.IMREAD_GRAYSCALE)
+            if im is None or cls is None:
+                continue
+            items.append((cv2.resize(im, (STORE_W, STORE_H), interpolation=cv2.INTER_AREA),
+                          cv2.resize(snap(cls), (STORE_W, STORE_H), interpolation=cv2.INTER_NEAREST)))
+        sites[op] = items
+    rob = os.path.join(data, "endovis15_robotic")
+    for ds in (1, 2):
+        d = os.path.join(rob, "Dataset%d" % ds)
+        masks = [os.path.join(d, f) for f in sorted(os.listdir(d)) if f.endswith("Segmentation.avi")] if os.path.isdir(d) else []
+        if not masks:
+            continue
+        video = cv2.VideoCapture(os.path.join(d, "Video.avi"))
+        caps = [cv2.VideoCapture(m) for m in masks]
+        items, k = [], 0
+        while True:
+            ok, im = video.read()
+            ms = [c.read() for c in caps]
+            if not ok or not all(m[0] for m in ms):
+                break
+            if k % 5 == 0:
+                lab = np.zeros(im.shape[:2], np.uint8)
+                for _, m in ms:
+                    s = snap(cv2.cvtColor(m, cv2.COLOR_BGR2GRAY))
+                    lab = np.where(s > 0, s, lab)
+                items.append((cv2.resize(im, (STORE_W, STORE_H), interpolation=cv2.INTER_AREA),
+                              cv2.resize(lab, (STORE_W, STORE_H), interpolation=cv2.INTER_NEAREST)))
+            k += 1
+        sites["DS%d" % ds] = items
+    return sites
+
+
+def augment(im, lab, rng):
+    """One randomly augmented copy at the network's input size."""
+    h, w = lab.shape
+    # Geometry: scale (zoom in up to 1.6x), rotation, shift, flips, aspect jitter.
+    s = rng.uniform(1.0, 1.6)
+    a = rng.uniform(-25, 25)
+    M = cv2.getRotationMatrix2D((w / 2 + rng.uniform(-0.15, 0.15) * w, h / 2 + rng.uniform(-0.15, 0.15) * h), a, s)
+    M[0, :] *= rng.uniform(0.85, 1.15)
+    im = cv2.warpAffine(im, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    lab = cv2.warpAffine(lab, M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REFLECT)
+    if rng.random() < 0.5:
+        im, lab = im[:, ::-1], lab[:, ::-1]
+    if rng.random() < 0.3:
+        im, lab = im[::-1], lab[::-1]
+    im = im.astype(np.float32)
+    # Colour: per-channel cast, brightness, contrast, desaturation or over-saturation.
+    im *= rng.uniform(0.75, 1.25, size=3).astype(np.float32)
+    im = (im - 128.0) * rng.uniform(0.6, 1.4) + 128.0 + rng.uniform(-40, 40)
+    grey = im.mean(axis=2, keepdims=True)
+    im = grey + (im - grey) * rng.uniform(0.4, 1.5)
+    # Vignetting / circular or side-bar view (black outside).
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    r = np.hypot((xx - w / 2) / (w / 2), (yy - h / 2) / (h / 2))
+    if rng.random() < 0.5:
+        im *= np.clip(1.0 - rng.uniform(0.0, 0.6) * r[..., None] ** 2, 0, 1)
+    u = rng.random()
+    if u < 0.2:
+        rad = rng.uniform(0.9, 1.3)
+        out = np.hypot((xx - w / 2) / (h / 2), (yy - h / 2) / (h / 2)) > rad
+        im[out] = rng.uniform(0, 12)
+    elif u < 0.35:
+        bar = int(rng.uniform(0.0, 0.12) * w)
+        if bar > 0:
+            im[:, :bar] = 0
+            im[:, w - bar:] = 0
+    # Specular spots and smoke/haze.
+    for _ in range(rng.integers(0, 5)):
+        c = (int(rng.uniform(0, w)), int(rng.uniform(0, h)))
+        ax = (int(rng.uniform(2, 14)), int(rng.uniform(2, 8)))
+        cv2.ellipse(im, c, ax, rng.uniform(0, 180), 0, 360, (255, 255, 255), -1)
+    if rng.random() < 0.25:
+        haze = rng.uniform(0.1, 0.45)
+        im = im * (1 - haze) + haze * rng.uniform(150, 230)
+    im = np.clip(im, 0, 255).astype(np.uint8)
+    if rng.random() < 0.4:
+        k = int(rng.choice([3, 5, 7]))
+        im = cv2.GaussianBlur(im, (k, k), 0)
+    # Reduce to the input size, then noise and JPEG at that size.
+    im = cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA)
+    lab = cv2.resize(np.ascontiguousarray(lab), (NET_W, NET_H), interpolation=cv2.INTER_NEAREST)
+    if rng.random() < 0.5:
+        im = np.clip(im + rng.normal(0, rng.uniform(1, 8), im.shape), 0, 255).astype(np.uint8)
+    if rng.random() < 0.5:
+        ok, buf = cv2.imencode(".jpg", im, [cv2.IMWRITE_JPEG_QUALITY, int(rng.uniform(30, 95))])
+        im = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(im), np.ascontiguousarray(lab)
+
+
+def to_input(bgr_list):
+    x = np.stack(bgr_list).astype(np.float32)
+    return torch.from_numpy(((x - MEAN) * SCALE).transpose(0, 3, 1, 2).copy())
+
+
+class DSConv(nn.Sequential):
+    """Depthwise-separable 3x3 convolution, batch norm, ReLU."""
+
+    def __init__(self, cin, cout, stride=1, dilation=1):
+        super().__init__(
+            nn.Conv2d(cin, cin, 3, stride, padding=dilation, dilation=dilation, groups=cin, bias=False),
+            nn.BatchNorm2d(cin), nn.ReLU(inplace=True),
+            nn.Conv2d(cin, cout, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+
+
+class ShaftNet(nn.Module):
+    """Strided stem, depthwise-separable encoder to 1/16, a dilated context block, a decoder with
+    skips back to 1/2, bilinear to the input size. About 60 k parameters."""
+
+    def __init__(self):
+        super().__init__()
+        self.stem = nn.Sequential(nn.Conv2d(3, 16, 3, 2, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True))
+        self.e2 = nn.Sequential(DSConv(16, 24, 2), DSConv(24, 24))
+        self.e3 = nn.Sequential(DSConv(24, 48, 2), DSConv(48, 48))
+        self.e4 = nn.Sequential(DSConv(48, 64, 2), DSConv(64, 64, dilation=2), DSConv(64, 64, dilation=4))
+        self.d3 = DSConv(64 + 48, 48)
+        self.d2 = DSConv(48 + 24, 32)
+        self.d1 = DSConv(32 + 16, 24)
+        self.head = nn.Conv2d(24, len(CLASSES), 1)
+
+    @staticmethod
+    def up(x):
+        return F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
+
+    def forward(self, x):
+        s1 = self.stem(x)
+        s2 = self.e2(s1)
+        s3 = self.e3(s2)
+        s4 = self.e4(s3)
+        y = self.d3(torch.cat([self.up(s4), s3], 1))
+        y = self.d2(torch.cat([self.up(y), s2], 1))
+        y = self.d1(torch.cat([self.up(y), s1], 1))
+        return self.up(self.head(y))
+
+
+def iou(model, items):
+    """Shaft-class pixel IoU over the items (each at the input size, no augmentation)."""
+    if not items:
+        return float("nan")
+    model.eval()
+    inter = union = 0
+    with torch.no_grad():
+        for i in range(0, len(items), 16):
+            batch = items[i:i + 16]
+            x = to_input([cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA) for im, _ in batch])
+            pred = model(x).argmax(1).numpy()
+            for p, (_, lab) in zip(pred, batch):
+                t = cv2.resize(lab, (NET_W, NET_H), interpolation=cv2.INTER_NEAREST)
+                inter += int(np.sum((p == 1) & (t == 1)))
+                union += int(np.sum((p == 1) | (t == 1)))
+    model.train()
+    return inter / max(1, union)
+
+
+def export(model, path):
+    import onnx
+    model.eval()
+    dummy = torch.zeros(1, 3, NET_H, NET_W)
+    torch.onnx.export(model, dummy, path, opset_version=11, input_names=["image"], output_names=["logits"],
+                      do_constant_folding=True)
+    m = onnx.load(path)
+    # OpenCV 4.6's importer refuses Identity nodes on initialisers: rename their outputs away.
+    ids = [n for n in m.graph.node if n.op_type == "Identity"]
+    for n in ids:
+        src, dst = n.input[0], n.output[0]
+        for other in m.graph.node:
+            for k, name in enumerate(other.input):
+                if name == dst:
+                    other.input[k] = src
+        m.graph.node.remove(n)
+    onnx.checker.check_model(m)
+    onnx.save(m, path)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--hold-out", default="", help="site left out of training and scored (OP1, OP2, OP3, DS1, DS2)")
+    ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--reference", default="", help="a BGR frame: write the network's output on it beside the model")
+    ap.add_argument("--weights", default="", help="skip training: export these weights (DIR/shaft_net.pt of a run)")
+    args = ap.parse_args()
+
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    t0 = time.time()
+    sites = load_sites(args.data)
+    if not sites:
+        sys.exit("train_shaft_net.py: no training data under %s" % args.data)
+    if args.hold_out and args.hold_out not in sites:
+        sys.exit("train_shaft_net.py: unknown site %s (have %s)" % (args.hold_out, ", ".join(sites)))
+    train = [it for s, items in sites.items() if s != args.hold_out for it in items]
+    held = sites.get(args.hold_out, [])
+    # Each site weighs about the same per epoch: the stills are few, the sequences long.
+    weights = np.concatenate([np.full(len(items), 1.0 / len(items)) for s, items in sites.items() if s != args.hold_out])
+    weights /= weights.sum()
+    print("sites: %s; training on %d images, holding out %s (%d)" %
+          (", ".join("%s %d" % (s, len(v)) for s, v in sites.items()), len(train), args.hold_out or "none", len(held)), flush=True)
+
+    model = ShaftNet()
+    if args.weights:
+        model.load_state_dict(torch.load(args.weights))
+        args.epochs = 0
+    opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=1e-4)
+    per_epoch, batch = 256, 16
+    steps = max(1, args.epochs * (per_epoch // batch))
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.15)
+    class_w = torch.tensor([1.0, 3.0, 2.0])
+    step = 0
+    for epoch in range(args.epochs):
+        idx = rng.choice(len(train), size=per_epoch, p=weights)
+        total = 0.0
+        for b in range(0, per_epoch, batch):
+            pairs = [augment(*train[i], rng) for i in idx[b:b + batch]]
+            x = to_input([p[0] for p in pairs])
+            y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64))
+            logits = model(x)
+            loss = F.cross_entropy(logits, y, weight=class_w)
+            # Soft Dice on the shaft class: the thin shafts count as much as the wide ones.
+            p = logits.softmax(1)[:, 1]
+            t = (y == 1).float()
+            loss = loss + 1.0 - (2 * (p * t).sum() + 1) / (p.sum() + t.sum() + 1)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            step += 1
+            total += float(loss)
+        if epoch % 10 == 9 or epoch == args.epochs - 1:
+            print("epoch %3d  loss %.4f  held-out shaft IoU %.3f  (%.0f s)" %
+                  (epoch + 1, total / (per_epoch // batch), iou(model, held), time.time() - t0), flush=True)
+    held_iou = iou(model, held)
+    os.makedirs(args.out, exist_ok=True)
+    onnx_path = os.path.join(args.out, "shaft_net.onnx")
+    torch.save(model.state_dict(), os.path.join(args.out, "shaft_net.pt"))
+    export(model, onnx_path)
+    with open(os.path.join(args.out, "shaft_net.yaml"), "w") as f:
+        f.write("# The learned shaft mask (scripts/train_shaft_net.sh reproduces it). Input: the BGR frame resized\n"
+                "# to width x height, (pixel - mean) * scale; output: logits per class at the input size.\n")
+        f.write("model: shaft_net.onnx\nwidth: %d\nheight: %d\nmean: %.1f\nscale: %.10f\n" % (NET_W, NET_H, MEAN, SCALE))
+        f.write("classes: [%s]\n" % ", ".join(CLASSES))
+        f.write("trained_on: [%s]\n" % ", ".join(s for s in sites if s != args.hold_out))
+        f.write("held_out: [%s]\nheld_out_shaft_iou: %.3f\n" % (args.hold_out, held_iou))
+        f.write("epochs: %d\nseed: %d\n" % (args.epochs, args.seed))
+    if args.reference:
+        im = cv2.imread(args.reference, cv2.IMREAD_COLOR)
+        if im is None:
+            sys.exit("train_shaft_net.py: cannot read %s" % args.reference)
+        model.eval()
+        with torch.no_grad():
+            out = model(to_input([cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA)]))[0].numpy()
+        fs = cv2.FileStorage(os.path.join(args.out, "shaft_net_reference.yml.gz"), cv2.FILE_STORAGE_WRITE)
+        fs.write("frame", os.path.basename(args.reference))
+        for c, name in enumerate(CLASSES):
+            fs.write(name, out[c].astype(np.float32))
+        fs.release()
+    print("trained in %.0f s on %d threads; held-out (%s) shaft IoU %.3f; model %s (%d bytes)" %
+          (time.time() - t0, torch.get_num_threads(), args.hold_out or "none", held_iou, onnx_path,
+           os.path.getsize(onnx_path)), flush=True)
+
+
+if __name__ == "__main__":
+    main()

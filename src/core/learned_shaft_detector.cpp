@@ -1,0 +1,154 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/core/learned_shaft_detector.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <opencv2/dnn.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+namespace endo_guidance::core {
+
+namespace fs = std::filesystem;
+
+std::string defaultShaftModel() { return std::string(ENDO_GUIDANCE_MODEL_DIR) + "/shaft_net.yaml"; }
+
+struct ShaftNet::Impl {
+  cv::dnn::Net net;
+  cv::Mat blob;
+};
+
+ShaftNet::ShaftNet(std::string const& yaml_path, int threads) : impl_(std::make_unique<Impl>()) {
+  std::string const path = yaml_path.empty() ? defaultShaftModel() : yaml_path;
+  auto fail = [&](std::string const& why) { throw std::runtime_error("shaft model '" + path + "': " + why); };
+  if (!fs::is_regular_file(path)) fail("no such file");
+  cv::FileStorage f;
+  try {
+    f.open(path, cv::FileStorage::READ);
+  } catch (cv::Exception const& e) {
+    fail(std::string("not a readable YAML file (") + e.what() + ")");
+  }
+  if (!f.isOpened()) fail("not a readable YAML file");
+  std::string onnx = f["model"].empty() ? std::string() : static_cast<std::string>(f["model"]);
+  int const w = f["width"].empty() ? 0 : static_cast<int>(f["width"]);
+  int const h = f["height"].empty() ? 0 : static_cast<int>(f["height"]);
+  if (onnx.empty()) fail("no 'model' (the ONNX file)");
+  if (w < 8 || h < 8 || w > 4096 || h > 4096) fail("'width' and 'height' must be in [8, 4096]");
+  size_ = cv::Size(w, h);
+  mean_ = f["mean"].empty() ? 0.0 : static_cast<double>(f["mean"]);
+  scale_ = f["scale"].empty() ? 1.0 : static_cast<double>(f["scale"]);
+  if (!(scale_ > 0.0) || !std::isfinite(mean_)) fail("'scale' must be positive and 'mean' finite");
+  for (auto const& c : f["classes"]) classes_.push_back(static_cast<std::string>(c));
+  auto const it = std::find(classes_.begin(), classes_.end(), "shaft");
+  if (it == classes_.end()) fail("'classes' has no 'shaft'");
+  shaft_ = static_cast<int>(it - classes_.begin());
+  if (fs::path(onnx).is_relative()) onnx = (fs::path(path).parent_path() / onnx).string();
+  if (!fs::is_regular_file(onnx)) fail("its ONNX file '" + onnx + "' is missing");
+  try {
+    impl_->net = cv::dnn::readNetFromONNX(onnx);
+  } catch (cv::Exception const& e) {
+    fail("OpenCV cannot load '" + onnx + "': " + e.what());
+  }
+  if (impl_->net.empty()) fail("OpenCV cannot load '" + onnx + "'");
+  impl_->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+  impl_->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+  if (threads < 1) fail("threads must be >= 1");
+  cv::setNumThreads(threads);  // (OpenCV's DNN layers use the global thread pool)
+  // One forward pass now: a model whose layers OpenCV cannot run fails here, with its shape checked.
+  cv::Mat const out = logits(cv::Mat(size_, CV_8UC3, cv::Scalar::all(0)));
+  if (out.dims != 4 || out.size[1] != static_cast<int>(classes_.size()) || out.size[2] != h || out.size[3] != w)
+    fail("its output is not classes x height x width logits");
+}
+
+ShaftNet::~ShaftNet() = default;
+
+cv::Mat ShaftNet::logits(cv::Mat const& bgr) {
+  CV_Assert(bgr.type() == CV_8UC3 && !bgr.empty());
+  // (BGR - mean) * scale at the input size, channels in BGR order (the training's).
+  cv::dnn::blobFromImage(bgr, impl_->blob, scale_, size_, cv::Scalar::all(mean_), false, false, CV_32F);
+  impl_->net.setInput(impl_->blob);
+  return impl_->net.forward();
+}
+
+cv::Mat ShaftNet::shaftProbability(cv::Mat const& bgr) {
+  cv::Mat const out = logits(bgr);
+  int const n = size_.area(), k = static_cast<int>(classes_.size());
+  auto const* l = out.ptr<float>();
+  cv::Mat prob(size_, CV_32F);
+  auto* p = prob.ptr<float>();
+  for (int i = 0; i < n; ++i) {  // softmax over the classes, the shaft's share
+    float m = l[i];
+    for (int c = 1; c < k; ++c) m = std::max(m, l[c * n + i]);
+    float s = 0.f;
+    for (int c = 0; c < k; ++c) s += std::exp(l[c * n + i] - m);
+    p[i] = std::exp(l[shaft_ * n + i] - m) / s;
+  }
+  return prob;
+}
+
+std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
+                                        LearnedDetectorParams const& params, int border_margin) {
+  CV_Assert(shaft_probability.type() == CV_32F && !fov.mask.empty());
+  cv::Mat p, mask;
+  cv::resize(shaft_probability, p, fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  cv::compare(p, params.shaft_probability, mask, cv::CMP_GE);
+  mask &= fov.mask;
+  cv::morphologyEx(mask, mask, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(3, 3)));
+  cv::Mat labels, stats, centroids;
+  int const n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
+  std::vector<Region> out;
+  for (int k = 1; k < n; ++k) {
+    int const area = stats.at<int>(k, cv::CC_STAT_AREA);
+    if (area < params.min_area) continue;
+    cv::Rect const box(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
+                       stats.at<int>(k, cv::CC_STAT_HEIGHT));
+    cv::Mat const comp = labels(box) == k;
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(comp, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, box.tl());
+    if (contours.empty()) continue;
+    auto const longest = std::max_element(contours.begin(), contours.end(),
+                                          [](auto const& a, auto const& b) { return a.size() < b.size(); });
+    Region r;
+    r.boundary = std::move(*longest);
+    r.box = box;
+    r.area = area;
+    // The entry: the middle of the longest run of boundary points on the view's edge.
+    auto const& B = r.boundary;
+    int const m = static_cast<int>(B.size());
+    std::vector<char> edge(static_cast<std::size_t>(m));
+    for (int i = 0; i < m; ++i) edge[i] = nearViewEdge(fov, B[i], border_margin);
+    int best_len = 0, best_mid = -1;
+    int const start = static_cast<int>(std::find(edge.begin(), edge.end(), 0) - edge.begin());  // a point off the edge
+    if (start < m)
+      for (int j = 0, len = 0; j <= m; ++j) {
+        int const i = (start + j) % m;
+        if (j < m && edge[i]) {
+          ++len;
+          continue;
+        }
+        if (len > best_len) {
+          best_len = len;
+          best_mid = (start + j - (len + 1) / 2) % m;
+        }
+        len = 0;
+      }
+    if (best_mid >= 0) {
+      r.seed = B[best_mid];
+    } else {  // not on the edge (or wholly on it): its point nearest to the edge
+      r.seed = B.front();
+      float dmin = std::numeric_limits<float>::max();
+      for (cv::Point const& q : B)
+        if (float const d = fov.depth.empty() ? 0.f : fov.depth.at<float>(q); d < dmin) {
+          dmin = d;
+          r.seed = q;
+        }
+    }
+    out.push_back(std::move(r));
+  }
+  // Largest first: the contour fit claims in this order.
+  std::sort(out.begin(), out.end(), [](Region const& a, Region const& b) { return a.area > b.area; });
+  return out;
+}
+
+}  // namespace endo_guidance::core
