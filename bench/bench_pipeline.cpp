@@ -285,6 +285,65 @@ void BM_RealStillsSegmentationPairedWithHSV(benchmark::State& st) {
   st.counters["frames"] = static_cast<double>(f.images.size());
 }
 
+// ------------------------------------------------------------------ learned detector
+// The learned detector (models/shaft_net.yaml) with `threads` OpenCV threads (the HSV reference
+// runs in the same pool). OpenCV's thread count is global: restored to 1 afterwards.
+PipelineParams learnedParams(int threads, int detect_every) {
+  PipelineParams pp;
+  pp.segmentation.detector = SegmentationParams::Detector::kLearned;
+  pp.segmentation.learned.threads = threads;
+  pp.segmentation.tracking.detect_every = detect_every;
+  return pp;
+}
+
+// The network alone (ShaftNet::shaftProbability()) on the robotic video's frames.
+void BM_LearnedNetworkPairedWithHSV(benchmark::State& st) {
+  auto const& f = roboticFrames(1, 150);
+  if (f.images.empty()) {
+    st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_robotic").string()).c_str());
+    return;
+  }
+  ShaftNet net(defaultShaftModel(), static_cast<int>(st.range(0)));
+  pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(net.shaftProbability(im).data); });
+  cv::setNumThreads(1);
+}
+
+// The whole pipeline with the learned detector on a robotic sequence as a video, the network
+// every `detect_every` frames (contour tracking between).
+void BM_LearnedRealVideoPairedWithHSV(benchmark::State& st) {
+  auto const& f = roboticFrames(static_cast<int>(st.range(0)), 150);
+  if (f.images.empty()) {
+    st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_robotic").string()).c_str());
+    return;
+  }
+  Pipeline p(f.K, f.images[0].size(), learnedParams(static_cast<int>(st.range(1)), static_cast<int>(st.range(2))));
+  double shafts = 0.0, tracked = 0.0, calls = 0.0;
+  pairedWithHSV(st, f, [&](cv::Mat const& im) {
+    auto const out = p.process(im);
+    shafts += static_cast<double>(out.instruments.size());
+    tracked += out.segmentation.tracked;
+    calls += 1.0;
+  });
+  st.counters["shafts"] = shafts / std::max(1.0, calls);    // reported per frame
+  st.counters["tracked"] = tracked / std::max(1.0, calls);  // fraction of frames without the network
+  cv::setNumThreads(1);
+}
+
+// The in-vivo stills with the learned detector, each on its own (the network every still).
+void BM_LearnedRealStillsPairedWithHSV(benchmark::State& st) {
+  auto const& f = invivoStills();
+  if (f.images.empty()) {
+    st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_rigid_invivo").string()).c_str());
+    return;
+  }
+  InstrumentSegmenter seg(learnedParams(static_cast<int>(st.range(0)), 1).segmentation);
+  pairedWithHSV(st, f, [&](cv::Mat const& im) {
+    seg.reset();
+    benchmark::DoNotOptimize(seg.process(im).contours.size());
+  });
+  cv::setNumThreads(1);
+}
+
 // The simulator's cost per frame: rendering three instruments on textured tissue (its frame
 // rate is bounded by 1 / this).
 void BM_SimulatorRender(benchmark::State& st) {
@@ -313,6 +372,12 @@ BENCHMARK(BM_Stage_StripSearch)->Apply(sizes);
 BENCHMARK(BM_SimulatorRender)->Apply(sizes);
 BENCHMARK(BM_RealVideoPairedWithHSV)->Arg(1)->Arg(2)->ArgName("endovis_robotic_dataset")->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_RealStillsSegmentationPairedWithHSV)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_LearnedNetworkPairedWithHSV)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_LearnedRealVideoPairedWithHSV)
+    ->ArgsProduct({{1, 2}, {1, 2}, {1, 4}})
+    ->ArgNames({"endovis_robotic_dataset", "threads", "detect_every"})
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_LearnedRealStillsPairedWithHSV)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

@@ -4,9 +4,10 @@
 to ONNX for OpenCV's DNN module (perception/learned_shaft_detector.h).
 
 Data (read from ../shared/data, never copied): the EndoVis'15 rigid in-vivo stills (OP1-OP3,
-class masks 0 / 70 jaws / 160 shaft) and the robotic sequences' mask videos (DS1, DS2; every
-5th frame, pixels snapped to {0, 70, 160}). Heavy augmentation: scale, rotation, flips, colour
-cast, brightness, blur, noise, JPEG, specular spots, circular or side-bar views.
+class masks 0 / 70 jaws / 160 shaft), the robotic sequences' mask videos (DS1, DS2; every 5th
+frame, pixels snapped to {0, 70, 160}) and the project's rendered frames with exact labels
+(--sim; SIM, never held out). Each site weighs the same. Heavy augmentation: scale, rotation,
+flips, colour cast, brightness, blur, noise, JPEG, specular spots, haze, circular or side-bar views.
 
   train_shaft_net.py --out DIR [--hold-out OP1|OP2|OP3|DS1|DS2] [--epochs N] [--seed S]
 
@@ -42,9 +43,20 @@ def snap(mask):
     return np.argmin(d, axis=0).astype(np.uint8)
 
 
-def load_sites(data):
+def load_sites(data, sim):
     """{site: [(bgr, labels)]} at STORE size."""
     sites = {}
+    if sim and os.path.isdir(sim):
+        items = []
+        for f in sorted(os.listdir(sim)):
+            if not f.endswith(".png") or f.endswith("_labels.png"):
+                continue
+            im = cv2.imread(os.path.join(sim, f), cv2.IMREAD_COLOR)
+            lab = cv2.imread(os.path.join(sim, f[:-4] + "_labels.png"), cv2.IMREAD_GRAYSCALE)
+            if im is not None and lab is not None:
+                items.append((cv2.resize(im, (STORE_W, STORE_H), interpolation=cv2.INTER_AREA),
+                              cv2.resize(lab, (STORE_W, STORE_H), interpolation=cv2.INTER_NEAREST)))
+        sites["SIM"] = items
     root = os.path.join(data, "endovis15_rigid_invivo")
     for op in ("OP1", "OP2", "OP3"):
         raw = os.path.join(root, op, "Raw")
@@ -160,17 +172,17 @@ class DSConv(nn.Sequential):
 
 class ShaftNet(nn.Module):
     """Strided stem, depthwise-separable encoder to 1/16, a dilated context block, a decoder with
-    skips back to 1/2, bilinear to the input size. About 60 k parameters."""
+    skips back to 1/2, bilinear to the input size. About 70 k parameters."""
 
     def __init__(self):
         super().__init__()
         self.stem = nn.Sequential(nn.Conv2d(3, 16, 3, 2, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True))
-        self.e2 = nn.Sequential(DSConv(16, 24, 2), DSConv(24, 24))
-        self.e3 = nn.Sequential(DSConv(24, 48, 2), DSConv(48, 48))
-        self.e4 = nn.Sequential(DSConv(48, 64, 2), DSConv(64, 64, dilation=2), DSConv(64, 64, dilation=4))
-        self.d3 = DSConv(64 + 48, 48)
-        self.d2 = DSConv(48 + 24, 32)
-        self.d1 = DSConv(32 + 16, 24)
+        self.e2 = nn.Sequential(DSConv(16, 32, 2), DSConv(32, 32))
+        self.e3 = nn.Sequential(DSConv(32, 64, 2), DSConv(64, 64))
+        self.e4 = nn.Sequential(DSConv(64, 128, 2), DSConv(128, 128, dilation=2), DSConv(128, 128, dilation=4))
+        self.d3 = DSConv(128 + 64, 64)
+        self.d2 = DSConv(64 + 32, 40)
+        self.d1 = DSConv(40 + 16, 24)
         self.head = nn.Conv2d(24, len(CLASSES), 1)
 
     @staticmethod
@@ -231,8 +243,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
     ap.add_argument("--out", required=True)
+    ap.add_argument("--sim", default="", help="rendered training frames (endo_guidance_synthetic --write-training DIR)")
     ap.add_argument("--hold-out", default="", help="site left out of training and scored (OP1, OP2, OP3, DS1, DS2)")
-    ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--epochs", type=int, default=80)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--reference", default="", help="a BGR frame: write the network's output on it beside the model")
     ap.add_argument("--weights", default="", help="skip training: export these weights (DIR/shaft_net.pt of a run)")
@@ -242,7 +255,7 @@ def main():
     rng = np.random.default_rng(args.seed)
     torch.set_num_threads(max(1, os.cpu_count() or 1))
     t0 = time.time()
-    sites = load_sites(args.data)
+    sites = load_sites(args.data, args.sim)
     if not sites:
         sys.exit("train_shaft_net.py: no training data under %s" % args.data)
     if args.hold_out and args.hold_out not in sites:
@@ -293,6 +306,7 @@ def main():
     torch.save(model.state_dict(), os.path.join(args.out, "shaft_net.pt"))
     export(model, onnx_path)
     with open(os.path.join(args.out, "shaft_net.yaml"), "w") as f:
+        f.write("%YAML:1.0\n---\n")  # (the header OpenCV's FileStorage needs)
         f.write("# The learned shaft mask (scripts/train_shaft_net.sh reproduces it). Input: the BGR frame resized\n"
                 "# to width x height, (pixel - mean) * scale; output: logits per class at the input size.\n")
         f.write("model: shaft_net.onnx\nwidth: %d\nheight: %d\nmean: %.1f\nscale: %.10f\n" % (NET_W, NET_H, MEAN, SCALE))
@@ -309,6 +323,7 @@ def main():
             out = model(to_input([cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA)]))[0].numpy()
         fs = cv2.FileStorage(os.path.join(args.out, "shaft_net_reference.yml.gz"), cv2.FILE_STORAGE_WRITE)
         fs.write("frame", os.path.basename(args.reference))
+        fs.write("frame_sum", float(im.astype(np.float64).sum()))  # the C++ test renders the same frame
         for c, name in enumerate(CLASSES):
             fs.write(name, out[c].astype(np.float32))
         fs.release()

@@ -8,6 +8,8 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "endo_guidance/core/image_reduction.h"
+
 namespace endo_guidance::core {
 
 namespace fs = std::filesystem;
@@ -16,7 +18,7 @@ std::string defaultShaftModel() { return std::string(ENDO_GUIDANCE_MODEL_DIR) + 
 
 struct ShaftNet::Impl {
   cv::dnn::Net net;
-  cv::Mat blob;
+  cv::Mat resized, blob;
 };
 
 ShaftNet::ShaftNet(std::string const& yaml_path, int threads) : impl_(std::make_unique<Impl>()) {
@@ -65,8 +67,9 @@ ShaftNet::~ShaftNet() = default;
 
 cv::Mat ShaftNet::logits(cv::Mat const& bgr) {
   CV_Assert(bgr.type() == CV_8UC3 && !bgr.empty());
-  // (BGR - mean) * scale at the input size, channels in BGR order (the training's).
-  cv::dnn::blobFromImage(bgr, impl_->blob, scale_, size_, cv::Scalar::all(mean_), false, false, CV_32F);
+  // Reduced as in training (area averaging), then (BGR - mean) * scale, channels in BGR order.
+  cv::resize(bgr, impl_->resized, size_, 0, 0, bgr.cols > size_.width ? cv::INTER_AREA : cv::INTER_LINEAR);
+  cv::dnn::blobFromImage(impl_->resized, impl_->blob, scale_, cv::Size(), cv::Scalar::all(mean_), false, false, CV_32F);
   impl_->net.setInput(impl_->blob);
   return impl_->net.forward();
 }
@@ -149,6 +152,78 @@ std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldO
   // Largest first: the contour fit claims in this order.
   std::sort(out.begin(), out.end(), [](Region const& a, Region const& b) { return a.area > b.area; });
   return out;
+}
+
+// A mask's outline wanders along the view's edge: its points that near it are the entry.
+constexpr int kMaskEdgeMargin = 3;
+
+SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params) {
+  SideFit fit;
+  fit.rejection = ContourRejection::kTooFewPoints;
+  cv::Moments const mo = cv::moments(region.boundary);
+  if (!(mo.m00 > 0.0)) return fit;
+  Eigen::Vector2d const c(mo.m10 / mo.m00, mo.m01 / mo.m00);
+  double const th = 0.5 * std::atan2(2.0 * mo.mu11, mo.mu20 - mo.mu02);
+  Eigen::Vector2d d(std::cos(th), std::sin(th));
+  Eigen::Vector2d const seed(region.seed.x, region.seed.y);
+  if (d.dot(c - seed) < 0.0) d = -d;  // from the entry into the view
+  Eigen::Vector2d const n(-d.y(), d.x());
+  std::vector<Eigen::Vector2d> off_edge;
+  std::vector<double> across;
+  double t_far = -std::numeric_limits<double>::infinity();
+  for (cv::Point const& q : region.boundary) {
+    if (nearViewEdge(fov, q, kMaskEdgeMargin * params.border_margin)) continue;
+    Eigen::Vector2d const x(q.x, q.y);
+    off_edge.push_back(x);
+    across.push_back(std::abs(n.dot(x - c)));
+    t_far = std::max(t_far, d.dot(x - seed));
+  }
+  if (off_edge.empty()) return fit;
+  std::nth_element(across.begin(), across.begin() + static_cast<std::ptrdiff_t>(across.size() / 2), across.end());
+  double const width = 2.0 * across[across.size() / 2];
+  std::array<std::vector<Eigen::Vector2d>, 2> side;
+  for (Eigen::Vector2d const& x : off_edge)
+    if (d.dot(x - seed) < t_far - width) side[n.dot(x - c) < 0.0 ? 0 : 1].push_back(toFullRes(x, scale));
+  for (int k = 0; k < 2; ++k) {
+    if (static_cast<int>(side[k].size()) < params.min_side_points) return fit;
+    auto const l = fitLineLMedS(side[k], params.lmeds_samples, params.seed + static_cast<std::uint64_t>(k));
+    if (!l || static_cast<double>(l->inliers.size()) < params.min_inlier_fraction * static_cast<double>(side[k].size())) {
+      fit.rejection = ContourRejection::kNotStraight;
+      return fit;
+    }
+    Eigen::Vector3d line = l->line;
+    if (line.dot(toFullRes(c, scale).homogeneous()) < 0.0) line = -line;  // the shaft on its positive side
+    fit.lines[k] = line;
+    for (int i : l->inliers) fit.points[k].push_back(side[k][static_cast<std::size_t>(i)]);
+    fit.inliers += static_cast<int>(l->inliers.size());
+  }
+  fit.entry = toFullRes(seed, scale);
+  setFarEnd(fit);
+  fit.rejection = ContourRejection::kNone;
+  return fit;
+}
+
+cv::Mat maskEdgeImage(cv::Mat const& shaft_probability, cv::Size size) {
+  cv::Mat p, r;
+  cv::resize(shaft_probability, p, size, 0, 0, cv::INTER_LINEAR);
+  p.convertTo(r, CV_8U, -255.0, 255.0);
+  cv::Mat const zero = cv::Mat::zeros(size, CV_8U);
+  cv::Mat out;
+  cv::merge(std::vector<cv::Mat>{zero, zero, r}, out);
+  return out;
+}
+
+bool agreesWithMask(ApparentContour const& c, SideFit const& sides, double gate_px) {
+  auto median = [](std::vector<Eigen::Vector2d> const& pts, ImageLine const& l) {
+    std::vector<double> d;
+    for (auto const& q : pts) d.push_back(std::abs(l.dot(q.homogeneous())));
+    if (d.empty()) return std::numeric_limits<double>::infinity();
+    std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2), d.end());
+    return d[d.size() / 2];
+  };
+  double const straight = std::max(median(sides.points[0], c.lines[0]), median(sides.points[1], c.lines[1]));
+  double const crossed = std::max(median(sides.points[0], c.lines[1]), median(sides.points[1], c.lines[0]));
+  return std::min(straight, crossed) <= gate_px;
 }
 
 }  // namespace endo_guidance::core

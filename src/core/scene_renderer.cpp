@@ -88,8 +88,9 @@ SceneRenderer::SceneRenderer(int width, int height, RenderOptions const& o) : wi
   }
 }
 
-cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) const {
+cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::Mat* labels) const {
   cv::Mat img = tissue_.clone();
+  if (labels) *labels = cv::Mat::zeros(height_, width_, CV_8U);
   // Far to near (by tip depth), so nearer shafts occlude farther ones.
   std::vector<SyntheticView const*> order;
   for (auto const& v : views) order.push_back(&v);
@@ -122,6 +123,7 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
         cv::Vec3f const col(I * 1.0f, I * 1.0f, I * 1.03f);
         cv::Vec3f& dst = reinterpret_cast<cv::Vec3f*>(row)[x];
         dst = dst * (1.f - cov) + col * cov;
+        if (labels && cov >= 0.5f) labels->at<std::uint8_t>(y, x) = 1;
       }
     }
     // Jaws: two metal wedges beyond the tip, opening and closing with k; 1.6 widths long, or up
@@ -140,6 +142,7 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
       for (auto const& q : {a0, a1, a2, a3})
         poly.emplace_back(static_cast<int>(std::lround(q.x() * 16.0)), static_cast<int>(std::lround(q.y() * 16.0)));
       cv::fillConvexPoly(img, poly, cv::Scalar(175, 175, 180), cv::LINE_AA, 4);
+      if (labels) cv::fillConvexPoly(*labels, poly, cv::Scalar(2), cv::LINE_8, 4);
     }
   }
   // Field of view, noise, 8-bit.
@@ -152,6 +155,7 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k) co
       cv::Vec3b& o = out.at<cv::Vec3b>(y, x);
       for (int ch = 0; ch < 3; ++ch) o[ch] = cv::saturate_cast<std::uint8_t>(v[ch] + (noisy ? N(rng) : 0.f));
     }
+  if (labels) labels->setTo(0, fov_ < 0.5f);
   if (options_.jpeg_quality > 0) {
     std::vector<std::uint8_t> buf;
     cv::imencode(".jpg", out, buf, {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality});

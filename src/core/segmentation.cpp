@@ -624,29 +624,35 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
   res.scale = scale;
   cv::Mat const prob = net_->shaftProbability(bgr);
   res.regions = proposeShaftRegions(prob, fov_, params_.learned, params_.contours.border_margin);
-  static std::vector<SideSearch> const kSearches{SideSearch::kFromEntry, SideSearch::kParallelFirst, SideSearch::kParallelSecond,
-                                                 SideSearch::kStretchPair};
   std::vector<std::size_t> contour_region;
   labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
+  cv::Mat mask_edges;  // maskEdgeImage(), made when first needed
+  // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its
+  // pixels from it is another edge.
+  double const gate_px = 1.5 * static_cast<double>(bgr.cols) / prob.cols;
   for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
     Region const& region = res.regions[ri];
     ContourRejection why = ContourRejection::kTooFewPoints;
     std::optional<ContourFit> fit;
-    if (static_cast<int>(res.contours.size()) < params_.regions.max_regions)
-      for (SideFit const& sides : fitSidesEach(region, fov_, scale, params_.contours, kSearches)) {
-        if (sides.rejection != ContourRejection::kNone) {
-          why = sides.rejection;
-          continue;
-        }
-        ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
-        if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
-        else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
-        if (f.contour && f.rejection == ContourRejection::kNone) {
-          fit = std::move(f);
-          break;
-        }
-        why = f.rejection;
+    SideFit const sides = maskSides(region, fov_, scale, params_.contours);
+    if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) {
+      why = ContourRejection::kDuplicate;
+    } else if (sides.rejection != ContourRejection::kNone) {
+      why = sides.rejection;
+    } else {
+      // The lines on the frame's edges where they are the mask's sides, else on the mask's edge.
+      ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
+      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) {
+        if (mask_edges.empty()) mask_edges = maskEdgeImage(prob, bgr.size());
+        ContourFit g = refineContour(sides, region, fov_, mask_edges, scale, params_.contours);
+        if (g.contour || !f.contour) f = std::move(g);
+        else f = ContourFit{std::nullopt, ContourRejection::kNotContinued, 0, {}};
       }
+      if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
+      else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
+      if (f.contour && f.rejection == ContourRejection::kNone) fit = std::move(f);
+      else why = f.rejection;
+    }
     res.region_status.push_back(fit ? ContourRejection::kNone : why);
     if (!fit) continue;
     ApparentContour c = *fit->contour;

@@ -19,6 +19,7 @@
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance/core/segmentation.h"
 #include "endo_guidance/core/shaft_tracking.h"
+#include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
 
@@ -90,6 +91,7 @@ void SegmentationNodelet::onInit() {
   monitor_ = std::make_unique<ros_io::FrameMonitor>(nh_, pnh_, "segmentation", expected_rate);
   monitor_->setExtra([this](diagnostic_updater::DiagnosticStatusWrapper& s) {
     std::lock_guard<std::mutex> lock(diag_mutex_);
+    s.add("detector", io::toString(params_.segmentation.detector));
     s.add("shafts (last frame)", last_shafts_);
     s.addf("strip searches per frame", "%.2f", diag_frames_ ? static_cast<double>(diag_strip_searches_) / diag_frames_ : 0.0);
     diag_frames_ = diag_strip_searches_ = 0;

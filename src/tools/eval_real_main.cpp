@@ -18,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -160,7 +161,12 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       ++strict_images[op];
       if (verbose)
         for (std::size_t i = 0; i < ms.size(); ++i)
-          if (sc.match[i] < 0) std::printf("  strict miss %s/%s: a shaft of %d px\n", op.c_str(), base.c_str(), ms[i].pixels);
+          if (sc.match[i] < 0) {
+            double best = std::numeric_limits<double>::infinity();
+            for (auto const& c : r.contours) best = std::min(best, endo_guidance::tools::findCost(ms[i], c));
+            std::printf("  strict miss %s/%s: a shaft of %d px (sides of %zu and %zu px), the nearest detection's larger side median %.1f px\n",
+                        op.c_str(), base.c_str(), ms[i].pixels, ms[i].sides[0].size(), ms[i].sides[1].size(), best);
+          }
     }
     st.shafts += static_cast<int>(ids.size());
     std::map<int, double> found;  // per shaft found: the smallest line median among its detections

@@ -317,7 +317,7 @@ int main(int argc, char** argv) {
   bool check = false, overlay = false, verbose = false, baseline = false;
   std::vector<std::string> only;
   std::vector<int> overlay_frames;  // --overlay-frame K (repeatable): eval_SCENE_K.png
-  std::string params_path;
+  std::string params_path, detector, model;
   int hard_jpeg = -1;         // --hard-jpeg Q: the hard scene's JPEG quality (0: no JPEG), else its default (80)
   double hard_noise = -1.0;   // --hard-noise SIGMA: its additive noise (grey levels), else its default (4)
   // Regression bounds per scene (SCENE=VALUE, repeatable): exit 1 when one is violated.
@@ -342,6 +342,8 @@ int main(int argc, char** argv) {
     else if (a == "--baseline") baseline = true;
     else if (a == "--scene" && i + 1 < argc) only.push_back(argv[++i]);
     else if (a == "--params" && i + 1 < argc) params_path = argv[++i];
+    else if (a == "--detector" && i + 1 < argc) detector = argv[++i];
+    else if (a == "--model" && i + 1 < argc) model = argv[++i];
     else if (a == "--hard-jpeg" && i + 1 < argc) hard_jpeg = std::atoi(argv[++i]);
     else if (a == "--hard-noise" && i + 1 < argc) hard_noise = std::atof(argv[++i]);
     else if (a == "--min-found" && i + 1 < argc && bound(argv[i + 1], min_found)) ++i;
@@ -355,6 +357,7 @@ int main(int argc, char** argv) {
                    "       [--overlay-frame K]...   (also write frame K's overlay, eval_SCENE_K.png; with --verbose its regions)\n"
                    "       [--baseline]   (the issue's Canny + Hough baseline instead of the pipeline)\n"
                    "       [--params PARAMS.yaml] [--verbose]   (config/pipeline.yaml or a subset)\n"
+                   "       [--detector colour|learned] [--model MODEL.yaml]   (over the parameters)\n"
                    "       [--hard-jpeg Q] [--hard-noise SIGMA]   (the hard scene's JPEG quality, 0 = none, and noise; defaults 80 and 4)\n"
                    "       [--min-found SCENE=PCT] [--max-false SCENE=PER_FRAME] [--max-line-p95 SCENE=PX] [--max-trocar SCENE=MM]\n"
                    "       [--max-located-error SCENE=MM]   (any located point -- on tf for the servo -- to its nearest true trocar, any frame)\n"
@@ -367,13 +370,14 @@ int main(int argc, char** argv) {
     return 2;
   }
   PipelineParams pp;
-  if (!params_path.empty()) {
-    try {
-      endo_guidance::io::loadPipelineYaml(params_path, pp);
-    } catch (std::exception const& e) {
-      std::fprintf(stderr, "endo_guidance_eval_synthetic: %s\n", e.what());
-      return 2;
-    }
+  try {
+    if (!params_path.empty()) endo_guidance::io::loadPipelineYaml(params_path, pp);
+    if (!detector.empty()) pp.segmentation.detector = endo_guidance::io::detectorFromString(detector);
+    if (!model.empty()) pp.segmentation.learned.model = model;
+    InstrumentSegmenter check_model(pp.segmentation);  // a model that cannot be loaded: said once, here
+  } catch (std::exception const& e) {
+    std::fprintf(stderr, "endo_guidance_eval_synthetic: %s\n", e.what());
+    return 2;
   }
   RenderOptions const clean;
   RenderOptions hard = hardRenderOptions();

@@ -42,7 +42,8 @@ void usage(std::FILE* f) {
   std::fprintf(f,
                "usage: endo_guidance_offline [--camera CAMERA.yaml] --radius METRES [--params PARAMS.yaml]\n"
                "                             [--output OUT.jsonl] [--overlay DIR|VIDEO] [--image-topic TOPIC]\n"
-               "                             [--fps HZ] [--truth TRUTH.yaml] [--independent] [--quiet] INPUT...\n"
+               "                             [--fps HZ] [--truth TRUTH.yaml] [--independent] [--quiet]\n"
+               "                             [--detector colour|learned] [--model MODEL.yaml] INPUT...\n"
                "  INPUT: image files, a directory of images (sorted by name), a video file, or a bag\n"
                "         (--image-topic; its camera_info is used when present).\n"
                "  CAMERA.yaml: ROS camera_info YAML (camera_calibration_parsers format); distorted\n"
@@ -53,7 +54,8 @@ void usage(std::FILE* f) {
                "  --independent: each frame on its own (unrelated stills): the pipeline forgets every\n"
                "         earlier frame (seed levels, tracks, insertion points) before it; by default the\n"
                "         frames are one video, in order.\n"
-               "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n");
+               "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n"
+               "  --detector, --model: segmentation/detector and segmentation/learned_model (over --params).\n");
 }
 
 // ------------------------------------------------------------------ frame sources
@@ -264,7 +266,7 @@ std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path;
+  std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path, detector, model;
   double radius = -1.0, fps = 25.0;
   bool quiet = false, independent = false;
   std::vector<std::string> inputs;
@@ -280,6 +282,8 @@ int main(int argc, char** argv) {
     if (a == "--camera") camera_path = value();
     else if (a == "--radius") radius = std::atof(value().c_str());
     else if (a == "--params") params_path = value();
+    else if (a == "--detector") detector = value();
+    else if (a == "--model") model = value();
     else if (a == "--output") output = value();
     else if (a == "--overlay") overlay = value();
     else if (a == "--image-topic") topic = value();
@@ -305,6 +309,8 @@ int main(int argc, char** argv) {
   try {
     PipelineParams params;
     if (!params_path.empty()) io::loadPipelineYaml(params_path, params);
+    if (!detector.empty()) params.segmentation.detector = io::detectorFromString(detector);
+    if (!model.empty()) params.segmentation.learned.model = model;
     if (radius > 0.0) params.radius = radius;
     else if (params_path.empty()) throw std::runtime_error("--radius METRES is required (e.g. 0.004 for 8 mm shafts)");
     if (!(params.radius > 0.0) || params.radius > 0.05) throw std::runtime_error("radius must be in (0, 0.05] m");

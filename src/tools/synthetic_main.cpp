@@ -25,6 +25,7 @@
 #include <sensor_msgs/CameraInfo.h>
 
 #include <filesystem>
+#include <random>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
@@ -40,6 +41,9 @@ void usage() {
       "  --seed S       noise seed (default 42)\n"
       "  --check TOL_M  exit 1 unless every trocar is found within TOL_M of its mean position\n"
       "  --write-sequence DIR  render the sequence instead: DIR/frames/NNNNNN.png, DIR/camera.yaml\n"
+      "  --write-training DIR  render training frames instead, each with its own rendering (black or grey shafts,\n"
+      "                        circular view, gauze, membranes, highlights, noise, JPEG; seeded by --seed):\n"
+      "                        DIR/NNNNNN.png and DIR/NNNNNN_labels.png (0 background, 1 shaft, 2 jaws)\n"
       "                 (ROS camera_info YAML) and DIR/truth.yaml (mean trocars, metres)\n"
       "  --write-bag FILE  render the sequence into a bag instead (LZ4): /endoscope/image_raw (bgr8),\n"
       "                 /endoscope/camera_info, frame endoscope_optical_frame, 25 Hz from t = 1000 s;\n"
@@ -58,6 +62,39 @@ void writeTruth(std::ostream& truth, SyntheticScene const& scene) {
 }
 
 // A simulated surgery as a camera driver would record it (replay.launch's input).
+// Training frames for the learned shaft mask (scripts/train_shaft_net.py): every 7th frame of the
+// scene, each rendered with its own randomly drawn options, with its exact labels.
+int writeTraining(std::string const& dir, SyntheticScene& scene, int frames, unsigned long seed) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  for (int i = 0; i < frames; ++i) {
+    RenderOptions o;
+    o.black_shafts = U(rng) < 0.3;
+    o.circular_fov = U(rng) < 0.3;
+    o.gauze = U(rng) < 0.4;
+    o.membranes = U(rng) < 0.7;
+    o.specular = U(rng) < 0.8;
+    o.noise_sigma = 6.0 * U(rng);
+    o.jpeg_quality = U(rng) < 0.5 ? static_cast<int>(40 + 55 * U(rng)) : 0;
+    o.seed = rng();
+    int const k = 7 * i;
+    SceneRenderer const renderer(scene.options().width, scene.options().height, o);
+    cv::Mat labels;
+    cv::Mat const image = renderer.render(scene.frame(k), k, &labels);
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d", i);
+    if (!cv::imwrite((fs::path(dir) / (std::string(name) + ".png")).string(), image) ||
+        !cv::imwrite((fs::path(dir) / (std::string(name) + "_labels.png")).string(), labels)) {
+      std::fprintf(stderr, "cannot write to %s\n", dir.c_str());
+      return 1;
+    }
+  }
+  std::printf("wrote %d training frames with labels to %s\n", frames, dir.c_str());
+  return 0;
+}
+
 void writeBag(std::string const& path, SyntheticScene& scene, SyntheticSceneOptions const& so, RenderOptions const& ro,
               int frames) {
   auto const parent = std::filesystem::path(path).parent_path();
@@ -95,7 +132,7 @@ int main(int argc, char** argv) {
   int frames = 500;
   double noise = 0.5, breathing = 0.002, check = -1.0;
   unsigned long seed = 42;
-  std::string write_dir, write_bag, scene_name = "clean";
+  std::string write_dir, write_bag, write_training, scene_name = "clean";
   bool sweep = false;
   for (int i = 1; i < argc; ++i) {
     std::string const a = argv[i];
@@ -112,6 +149,7 @@ int main(int argc, char** argv) {
     else if (a == "--seed") seed = std::strtoul(next("--seed"), nullptr, 10);
     else if (a == "--check") check = std::atof(next("--check"));
     else if (a == "--write-sequence") write_dir = next("--write-sequence");
+    else if (a == "--write-training") write_training = next("--write-training");
     else if (a == "--scene") scene_name = next("--scene");
     else if (a == "--write-bag") write_bag = next("--write-bag");
     else if (a == "--noise-sweep") sweep = true;
@@ -176,6 +214,7 @@ int main(int argc, char** argv) {
   so.breathing_amplitude = breathing;
   so.seed = seed;
   SyntheticScene scene(defaultInstruments(), so);
+  if (!write_training.empty()) return writeTraining(write_training, scene, frames, seed);
   if (!write_dir.empty() || !write_bag.empty()) {
     // The embedded default sequence of the README's main command.
     RenderOptions ro;

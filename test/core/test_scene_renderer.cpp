@@ -55,3 +55,34 @@ TEST(SceneRenderer, EdgesLieOnTheProjectedTrueCylinder) {
       EXPECT_LT(worst, 0.5);
     }
 }
+
+// The training labels: shaft on each shaft's axis, jaws just beyond its tip, background away from
+// every instrument, nothing outside a circular view; the image itself unchanged by asking for them.
+TEST(SceneRenderer, LabelsMarkShaftsJawsAndBackground) {
+  SyntheticSceneOptions const so;
+  SyntheticScene scene(defaultInstruments(), so);
+  RenderOptions o;
+  o.circular_fov = true;
+  SceneRenderer const r(so.width, so.height, o);
+  auto const views = scene.frame(10);
+  ASSERT_GE(views.size(), 2u);
+  cv::Mat labels;
+  cv::Mat const with = r.render(views, 10, &labels);
+  EXPECT_EQ(cv::norm(with, r.render(views, 10), cv::NORM_INF), 0.0);
+  ASSERT_EQ(labels.type(), CV_8U);
+  ASSERT_EQ(labels.size(), with.size());
+  int shaft = 0, jaws = 0;
+  for (auto const& v : views) {
+    Eigen::Vector2d const d = (v.truth.tip_px - v.truth.entry_px).normalized();
+    Eigen::Vector2d const mid = v.truth.tip_px - 30.0 * d;
+    if (r.fieldOfView().at<float>(cv::Point(mid.x(), mid.y())) > 0.9f) shaft += labels.at<std::uint8_t>(cv::Point(mid.x(), mid.y())) == 1;
+    cv::Rect const near_tip = cv::Rect(static_cast<int>(v.truth.tip_px.x()) - 15, static_cast<int>(v.truth.tip_px.y()) - 15, 31, 31) &
+                              cv::Rect(0, 0, labels.cols, labels.rows);
+    jaws += cv::countNonZero(labels(near_tip) == 2) >= 10;  // the jaws' wedges about the tip
+  }
+  EXPECT_GE(shaft, 2);
+  EXPECT_GE(jaws, 2);
+  EXPECT_EQ(labels.at<std::uint8_t>(0, 0), 0);  // outside the circular view
+  EXPECT_EQ(cv::countNonZero(labels > 2), 0);
+  EXPECT_LT(cv::countNonZero(labels), labels.total() / 2);
+}

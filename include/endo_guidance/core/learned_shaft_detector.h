@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "endo_guidance/core/contour_lines.h"
 #include "endo_guidance/core/field_of_view.h"
 #include "endo_guidance/core/region_growing.h"
 
@@ -50,9 +51,28 @@ class ShaftNet {
 /// The learned shaft detector's proposals: the connected components of the network's shaft mask
 /// (processing scale, inside the field of view), each as a Region whose seed is the middle of its
 /// longest run on the view's border (the entry), or, for a component that does not reach the
-/// border, its boundary point nearest to the border. The contour fit (fitSides(),
-/// refineContour()) turns them into sub-pixel lines as it does the grown regions.
+/// border, its boundary point nearest to the border. maskSides() gives each one's side pair and
+/// the contour fit (refineContour()) turns it into sub-pixel lines as it does the grown regions'.
 std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
                                         LearnedDetectorParams const& params, int border_margin);
+
+/// The side pair of a mask component, for refineContour(): its boundary points off the view's
+/// edge (3 border_margin), less the far end (within one width of it: the tip), split by the component's principal
+/// axis (second moments of its outline), one LMedS line per side ([Rousseeuw87]), oriented toward
+/// the shaft. A mask's outline is no chain of straight runs from the entry (the network's edge
+/// wanders by a few px): the principal axis splits it where following it from the entry does not.
+/// Rejection kTooFewPoints when a side has fewer than min_side_points, kNotStraight when under
+/// min_inlier_fraction of them lie on its line.
+SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+
+/// The network's own edge as an image for the contour fit: BGR (0, 0, 255 (1 - p)) at `size`
+/// (bilinear), whose chroma (edgeChannel()) falls from tissue into the shaft where p crosses 1/2.
+/// Where the frame has no edge the contour fit can locate (a grey shaft on pale tissue) or its
+/// strongest edge is another (a printed band along the shaft), the lines are located on this one.
+cv::Mat maskEdgeImage(cv::Mat const& shaft_probability, cv::Size size);
+
+/// Whether each of the contour's lines lies within gate_px (median) of a different side of the
+/// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
+bool agreesWithMask(ApparentContour const& c, SideFit const& sides, double gate_px);
 
 }  // namespace endo_guidance::core

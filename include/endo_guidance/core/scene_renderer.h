@@ -39,7 +39,9 @@ class SceneRenderer {
  public:
   SceneRenderer(int width, int height, RenderOptions const& options = {});
   /// BGR image of the given views (from SyntheticScene::frame), frame index k for animation.
-  cv::Mat render(std::vector<SyntheticView> const& views, int k = 0) const;
+  /// `labels` (optional): per pixel 0 background, 1 shaft, 2 jaws (CV_8U; a pixel is the nearest
+  /// instrument's part covering at least half of it, inside the field of view): exact training labels.
+  cv::Mat render(std::vector<SyntheticView> const& views, int k = 0, cv::Mat* labels = nullptr) const;
   RenderOptions const& options() const { return options_; }
   /// Coverage of the field of view (CV_32F, 1 inside, 0 outside, vignetting included).
   cv::Mat const& fieldOfView() const { return fov_; }

@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# Trains the learned shaft mask on the CPU (scripts/train_shaft_net.py, Debian's PyTorch) from
+# ../shared/data and the project's rendered frames, and exports it for OpenCV's DNN module.
+#
+#   scripts/train_shaft_net.sh            the shipped model (every site) -> models/, with the
+#                                         reference output the C++ test compares against
+#   scripts/train_shaft_net.sh --loso     leave one site out: a model without OP1, OP2, OP3, DS2
+#                                         each (build/training/loso/SITE), scored on that site by
+#                                         endo_guidance_eval_real; the table -> build/training/loso/table.md
+#   scripts/train_shaft_net.sh --check    retrains the shipped model into build/training/check and
+#                                         compares its figures with the committed model's
+# Fixed seeds; the training time on this machine is printed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+MODE="${1:-ship}"
+PY=/usr/bin/python3
+DATA="${ENDO_GUIDANCE_DATA:-$(cd .. && pwd)/shared/data}"
+BIN=build/devel/lib/endo_guidance
+OUT=build/training
+
+[ -d "$DATA/endovis15_rigid_invivo" ] || { echo "train_shaft_net.sh: no training data at $DATA (set ENDO_GUIDANCE_DATA)" >&2; exit 2; }
+if ! $PY -c "import torch, onnx" 2>/dev/null; then
+  echo "[train] installing python3-torch python3-onnx (training only; never needed at run time)"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends python3-torch python3-onnx >/dev/null
+fi
+[ -x "$BIN/endo_guidance_synthetic" ] && [ -x "$BIN/endo_guidance_eval_real" ] || bash scripts/setup.sh
+mkdir -p "$OUT"
+# Rendered frames with exact labels (domain-randomised renderings), and the reference frame.
+[ -f "$OUT/sim/000299_labels.png" ] || "$BIN/endo_guidance_synthetic" --write-training "$OUT/sim" --frames 300 --seed 5
+[ -f "$OUT/reference/frames/000000.png" ] || "$BIN/endo_guidance_synthetic" --write-sequence "$OUT/reference" --frames 1 >/dev/null
+
+train() {  # OUT_DIR HOLD_OUT [extra args]
+  local dir="$1" hold="$2"; shift 2
+  $PY scripts/train_shaft_net.py --data "$DATA" --sim "$OUT/sim" --out "$dir" --hold-out "$hold" --seed 1 "$@" | tee "$dir.log"
+}
+# The strict figures of one model on one site (in-vivo: found at 10 px, false per image, side median).
+score() {  # MODEL_YAML SITE
+  if [ "$2" = DS2 ] || [ "$2" = DS1 ]; then
+    "$BIN/endo_guidance_eval_real" --data "$DATA" --robotic-only --detector learned --model "$1"
+  else
+    "$BIN/endo_guidance_eval_real" --data "$DATA" --invivo-only --sites "$2" --detector learned --model "$1"
+  fi
+}
+
+case "$MODE" in
+  ship)
+    mkdir -p models
+    train models "" --reference "$OUT/reference/frames/000000.png"
+    rm -f models/shaft_net.pt models.log  # (the weights stay out of the package: the ONNX file is the model)
+    ;;
+  --loso)
+    mkdir -p "$OUT/loso"
+    for site in OP1 OP2 OP3 DS2; do
+      train "$OUT/loso/$site" "$site"
+      score "$OUT/loso/$site/shaft_net.yaml" "$site" > "$OUT/loso/$site.eval"
+    done
+    $PY - "$OUT/loso" <<'PY'
+import re, sys, os
+d = sys.argv[1]
+rows = ["| held out | found <= 2 / 5 / 10 px | false per image (frame) | side median px | annotated axes found |", "|---|---|---|---|---|"]
+for site in ("OP1", "OP2", "OP3", "DS2"):
+    text = open(os.path.join(d, site + ".eval")).read()
+    if site.startswith("DS"):
+        block = text[text.index("robotic dataset %s" % site[2:]):]
+        m = re.search(r"strict, mask shafts.*?found ([\d.]+) % .*?, ([\d.]+) % .*?, ([\d.]+) % .*?; \d+ false = ([\d.]+) per frame; side median to its line: median ([\d.na]+) px", block)
+        ax = re.search(r"annotated axes found .*?= ([\d.]+) %", block).group(1)
+    else:
+        m = re.search(r"  %s: \d+ shafts, found ([\d.]+) % .*?, ([\d.]+) % .*?, ([\d.]+) % .*?; \d+ false = ([\d.]+) per image; side median to its line: median ([\d.na]+) px" % site, text)
+        ax = "-"
+    rows.append("| %s | %s / %s / %s %% | %s | %s | %s |" % (site, m.group(1), m.group(2), m.group(3), m.group(4), m.group(5), ax + (" %" if ax != "-" else "")))
+open(os.path.join(d, "table.md"), "w").write("\n".join(rows) + "\n")
+print("\n".join(rows))
+PY
+    ;;
+  --check)
+    train "$OUT/check" ""
+    for m in models/shaft_net.yaml "$OUT/check/shaft_net.yaml"; do
+      echo "== $m"; score "$m" OP1,OP2,OP3 | grep -E "^  all:"
+    done
+    echo "(the two 'all' lines should agree within 3 points of found and 0.05 false per image)"
+    ;;
+  *) echo "usage: scripts/train_shaft_net.sh [--loso|--check]" >&2; exit 2 ;;
+esac
