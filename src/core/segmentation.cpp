@@ -171,14 +171,17 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
 SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars) {
   CV_Assert(bgr.type() == CV_8UC3 && !bgr.empty());
   if (auto t = track(bgr)) return std::move(*t);
+  int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
+  reduceImage(bgr, scale, small_);  // (image_reduction.h)
+  updateFieldOfView();
+  return net_ ? detectLearned(bgr, scale) : detectColour(bgr, trocars, scale);
+}
+
+SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale) {
   // Frames since the last detection frame: the ages of the seed memory count frames.
   int const elapsed = since_detection_ + 1;
   SegmentationResult res;
-  int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
   res.scale = scale;
-  reduceImage(bgr, scale, small_);  // (image_reduction.h)
-  updateFieldOfView();
-  if (net_) return detectLearned(bgr, scale);
   colour_.compute(small_, raw_);
   sigmaFilter(raw_, filtered_, params_.sigma_radius, params_.sigma_delta);
   // Trocar images in processing pixels (homogeneous: some lie at infinity).

@@ -156,7 +156,9 @@ class InstrumentSegmenter {
                         std::vector<int>& seed_view) const;
   std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
   void updateFieldOfView();  // on small_, every fov_refresh frames or when its size changes
-  SegmentationResult detectLearned(cv::Mat const& bgr, int scale);  // the learned detector's frame
+  // One detection frame (small_ and fov_ set): the colour method's, or the learned detector's.
+  SegmentationResult detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale);
+  SegmentationResult detectLearned(cv::Mat const& bgr, int scale);
   // Follows res's shafts in the next frames when `follow` (contour tracking on); memory: per shaft, its seed's entry.
   void startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr, std::vector<std::size_t> const& memory);
   std::shared_ptr<ShaftNet> net_;  // the learned detector's network (Detector::kLearned)
