@@ -203,14 +203,46 @@ SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, Conto
   return fit;
 }
 
-cv::Mat maskEdgeImage(cv::Mat const& shaft_probability, cv::Size size) {
-  cv::Mat p, r;
-  cv::resize(shaft_probability, p, size, 0, 0, cv::INTER_LINEAR);
-  p.convertTo(r, CV_8U, -255.0, 255.0);
-  cv::Mat const zero = cv::Mat::zeros(size, CV_8U);
-  cv::Mat out;
-  cv::merge(std::vector<cv::Mat>{zero, zero, r}, out);
-  return out;
+ContourFit maskContour(SideFit const& sides, ContourLinesParams const& params, double sigma_floor_px) {
+  ContourFit fit;
+  auto reject = [&](ContourRejection r) {
+    fit.rejection = r;
+    return fit;
+  };
+  Eigen::Vector2d const along = sides.far - sides.entry;
+  std::array<Eigen::Vector2d, 2> dir;
+  for (int k = 0; k < 2; ++k) {
+    dir[k] = Eigen::Vector2d(-sides.lines[k].y(), sides.lines[k].x());
+    if (dir[k].dot(along) < 0.0) dir[k] = -dir[k];
+  }
+  if (std::acos(std::clamp(dir[0].dot(dir[1]), -1.0, 1.0)) > params.max_angle_deg * M_PI / 180.0)
+    return reject(ContourRejection::kNotParallel);
+  Eigen::Vector2d const axis = (dir[0] + dir[1]).normalized();
+  Eigen::Vector2d const left(axis.y(), -axis.x());
+  int const L = sides.lines[0].head<2>().dot(left) < 0.0 ? 0 : 1;  // normal pointing right: the left line
+  if (!(sides.lines[L].head<2>().dot(left) < 0.0 && sides.lines[1 - L].head<2>().dot(left) > 0.0))
+    return reject(ContourRejection::kCrossing);
+  ApparentContour c;
+  c.lines = {sides.lines[L], sides.lines[1 - L]};
+  c.entry_px = sides.entry;
+  c.tip_px = sides.far;
+  fit.edges = {sides.points[L], sides.points[1 - L]};
+  auto const fitted = rectifyContour(c, fit.edges, [](Eigen::Vector2d const& q) { return q; }, params.min_side_points, sigma_floor_px);
+  if (!fitted) return reject(ContourRejection::kTooFewPoints);
+  c = *fitted;
+  ImageLine const ax = imageAxis(c);
+  c.entry_px = footOnLine(ax, c.entry_px);
+  c.tip_px = footOnLine(ax, c.tip_px);
+  double const length = (c.tip_px - c.entry_px).norm();
+  double const w_entry = shaftWidthAt(c, c.entry_px), w_tip = shaftWidthAt(c, c.tip_px);
+  if (c.residual_px > params.max_residual_px) return reject(ContourRejection::kResidual);
+  if (length < params.min_length_px) return reject(ContourRejection::kTooShort);
+  if (std::min(w_entry, w_tip) < params.min_width_px) return reject(ContourRejection::kTooThin);
+  if (length < params.min_elongation * 0.5 * (w_entry + w_tip)) return reject(ContourRejection::kNotElongated);
+  if (params.max_widening > 0.0 && w_tip > params.max_widening * w_entry) return reject(ContourRejection::kWidens);
+  fit.contour = c;
+  fit.edge_points = static_cast<int>(fit.edges[0].size() + fit.edges[1].size());
+  return fit;
 }
 
 bool agreesWithMask(ApparentContour const& c, SideFit const& sides, double gate_px) {

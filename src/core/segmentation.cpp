@@ -619,8 +619,8 @@ void InstrumentSegmenter::updateFieldOfView() {
   frames_since_fov_ = 0;
 }
 
-// The learned detector: the network's shaft-mask components (proposeShaftRegions()) through the
-// same contour fit as the grown regions (fitSides(), each side search in turn, refineContour()),
+// The learned detector: the network's shaft-mask components (proposeShaftRegions()), each one's
+// side pair (maskSides()) through the same contour fit as the grown regions (refineContour()),
 // the same glare check and duplicate removal.
 SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int scale) {
   SegmentationResult res;
@@ -629,28 +629,23 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
   res.regions = proposeShaftRegions(prob, fov_, params_.learned, params_.contours.border_margin);
   std::vector<std::size_t> contour_region;
   labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
-  cv::Mat mask_edges;  // maskEdgeImage(), made when first needed
   // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its
-  // pixels from it is another edge.
-  double const gate_px = 1.5 * static_cast<double>(bgr.cols) / prob.cols;
-  for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
+  // pixels from it is another edge; a line on the mask's side has its pixel's quantisation
+  // error (pixel / sqrt(12)) as the systematic floor of its covariance.
+  double const net_px = static_cast<double>(bgr.cols) / prob.cols;
+  double const gate_px = 1.5 * net_px;
+  double const mask_floor_px = std::max(params_.contours.line_sigma_floor_px, net_px / std::sqrt(12.0));
+  for (std::size_t ri = 0; ri < res.regions.size() && static_cast<int>(res.contours.size()) < params_.regions.max_regions; ++ri) {
     Region const& region = res.regions[ri];
     ContourRejection why = ContourRejection::kTooFewPoints;
     std::optional<ContourFit> fit;
     SideFit const sides = maskSides(region, fov_, scale, params_.contours);
-    if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) {
-      why = ContourRejection::kDuplicate;
-    } else if (sides.rejection != ContourRejection::kNone) {
+    if (sides.rejection != ContourRejection::kNone) {
       why = sides.rejection;
     } else {
-      // The lines on the frame's edges where they are the mask's sides, else on the mask's edge.
+      // The lines on the frame's edges where they are the mask's sides, else on the mask's sides.
       ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
-      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) {
-        if (mask_edges.empty()) mask_edges = maskEdgeImage(prob, bgr.size());
-        ContourFit g = refineContour(sides, region, fov_, mask_edges, scale, params_.contours);
-        if (g.contour || !f.contour) f = std::move(g);
-        else f = ContourFit{std::nullopt, ContourRejection::kNotContinued, 0, {}};
-      }
+      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) f = maskContour(sides, params_.contours, mask_floor_px);
       if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
       else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
       if (f.contour && f.rejection == ContourRejection::kNone) fit = std::move(f);
@@ -668,6 +663,7 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
     cv::drawContours(labels_, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(static_cast<int>(res.contours.size())),
                      cv::FILLED);
   }
+  res.regions.resize(res.region_status.size());  // (those beyond max_regions were not fitted)
   auto drop = [&](std::vector<std::size_t> const& dup) {
     for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
       res.region_status[contour_region[*it]] = ContourRejection::kDuplicate;

@@ -100,6 +100,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   InvivoStats st;
   std::map<std::string, StrictScore> strict;  // per operation
   std::map<std::string, int> strict_images;
+  std::map<std::string, int> covered;  // per operation: mask shafts the network covers (learned detector)
   std::vector<fs::path> files;
   for (std::string const& op : sites) {
     fs::path const raw = root / op / "Raw";
@@ -158,6 +159,14 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       std::string const op = f.parent_path().parent_path().filename().string();
       StrictScore const sc = scoreStrict(ms, r.contours);
       strict[op] += sc;
+      // The learned detector: the mask shafts its network covers (half of their pixels at
+      // p >= 1/2), found or not -- what the network gives the contour fit.
+      if (sp.detector == SegmentationParams::Detector::kLearned) {
+        cv::Mat shaft_like;
+        cv::resize(seg.feature() < 128, shaft_like, im.size(), 0, 0, cv::INTER_NEAREST);
+        for (auto const& [id, m] : shafts)
+          if (cv::countNonZero(m) >= kStrictMinPx) covered[op] += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
+      }
       ++strict_images[op];
       if (verbose)
         for (std::size_t i = 0; i < ms.size(); ++i)
@@ -322,6 +331,8 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   int all_images = 0;
   for (auto const& [op, sc] : strict) {
     printStrict(op.c_str(), sc, strict_images[op], "image");
+    if (sp.detector == SegmentationParams::Detector::kLearned)
+      std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2)\n", op.c_str(), covered[op], sc.shafts);
     all += sc;
     all_images += strict_images[op];
   }

@@ -65,11 +65,13 @@ std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldO
 /// min_inlier_fraction of them lie on its line.
 SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
 
-/// The network's own edge as an image for the contour fit: BGR (0, 0, 255 (1 - p)) at `size`
-/// (bilinear), whose chroma (edgeChannel()) falls from tissue into the shaft where p crosses 1/2.
-/// Where the frame has no edge the contour fit can locate (a grey shaft on pale tissue) or its
-/// strongest edge is another (a printed band along the shaft), the lines are located on this one.
-cv::Mat maskEdgeImage(cv::Mat const& shaft_probability, cv::Size size);
+/// The contour on the mask's own sides, where the frame has no edge that agrees with them (a
+/// grey shaft on pale tissue, a printed band along the shaft): the side pair's lines refitted by
+/// least squares to its points (rectifyContour(), identity mapping) with `sigma_floor_px` as the
+/// systematic floor of their covariance, ordered as refineContour() orders them, and the same
+/// shape checks on length, width, elongation, widening and the angle between the lines.
+/// ContourFit::edges: the side points behind each line (contour order).
+ContourFit maskContour(SideFit const& sides, ContourLinesParams const& params, double sigma_floor_px);
 
 /// Whether each of the contour's lines lies within gate_px (median) of a different side of the
 /// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
