@@ -312,7 +312,9 @@ def main():
         f.write("model: shaft_net.onnx\nwidth: %d\nheight: %d\nmean: %.1f\nscale: %.10f\n" % (NET_W, NET_H, MEAN, SCALE))
         f.write("classes: [%s]\n" % ", ".join(CLASSES))
         f.write("trained_on: [%s]\n" % ", ".join(s for s in sites if s != args.hold_out))
-        f.write("held_out: [%s]\nheld_out_shaft_iou: %.3f\n" % (args.hold_out, held_iou))
+        f.write("held_out: [%s]\n" % args.hold_out)
+        if held:
+            f.write("held_out_shaft_iou: %.3f\n" % held_iou)
         f.write("epochs: %d\nseed: %d\n" % (args.epochs, args.seed))
     if args.reference:
         im = cv2.imread(args.reference, cv2.IMREAD_COLOR)

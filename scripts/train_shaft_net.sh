@@ -66,7 +66,7 @@ for site in ("OP1", "OP2", "OP3", "DS2"):
         m = re.search(r"strict, mask shafts.*?found ([\d.]+) % .*?, ([\d.]+) % .*?, ([\d.]+) % .*?; \d+ false = ([\d.]+) per frame; side median to its line: median ([\d.na]+) px", block)
         ax = re.search(r"annotated axes found .*?= ([\d.]+) %", block).group(1)
     else:
-        m = re.search(r"  %s: \d+ shafts, found ([\d.]+) % .*?, ([\d.]+) % .*?, ([\d.]+) % .*?; \d+ false = ([\d.]+) per image; side median to its line: median ([\d.na]+) px" % site, text)
+        m = re.search(r"  " + site + r": \d+ shafts, found ([\d.]+) % .*?, ([\d.]+) % .*?, ([\d.]+) % .*?; \d+ false = ([\d.]+) per image; side median to its line: median ([\d.na]+) px", text)
         ax = "-"
     rows.append("| %s | %s / %s / %s %% | %s | %s | %s |" % (site, m.group(1), m.group(2), m.group(3), m.group(4), m.group(5), ax + (" %" if ax != "-" else "")))
 open(os.path.join(d, "table.md"), "w").write("\n".join(rows) + "\n")

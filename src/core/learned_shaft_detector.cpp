@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -90,6 +91,93 @@ cv::Mat ShaftNet::shaftProbability(cv::Mat const& bgr) {
   return prob;
 }
 
+namespace {
+
+// A Region of one mask (CV_8U, box-sized, at box.tl()): its outer boundary, and its seed at the
+// middle of its longest run of boundary points on the view's edge (or, off the edge, its boundary
+// point nearest to it).
+std::optional<Region> maskRegion(cv::Mat const& mask, cv::Rect const& box, FieldOfView const& fov, int border_margin) {
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, box.tl());
+  if (contours.empty()) return std::nullopt;
+  Region r;
+  r.boundary = std::move(*std::max_element(contours.begin(), contours.end(), [](auto const& a, auto const& b) { return a.size() < b.size(); }));
+  r.box = box;
+  r.area = cv::countNonZero(mask);
+  auto const& B = r.boundary;
+  int const m = static_cast<int>(B.size());
+  std::vector<char> edge(static_cast<std::size_t>(m));
+  for (int i = 0; i < m; ++i) edge[i] = nearViewEdge(fov, B[i], border_margin);
+  int best_len = 0, best_mid = -1;
+  int const start = static_cast<int>(std::find(edge.begin(), edge.end(), 0) - edge.begin());  // a point off the edge
+  if (start < m)
+    for (int j = 0, len = 0; j <= m; ++j) {
+      int const i = (start + j) % m;
+      if (j < m && edge[i]) {
+        ++len;
+        continue;
+      }
+      if (len > best_len) {
+        best_len = len;
+        best_mid = (start + j - (len + 1) / 2) % m;
+      }
+      len = 0;
+    }
+  if (best_mid >= 0) {
+    r.seed = B[best_mid];
+  } else {
+    r.seed = B.front();
+    float dmin = std::numeric_limits<float>::max();
+    for (cv::Point const& q : B)
+      if (float const d = fov.depth.empty() ? 0.f : fov.depth.at<float>(q); d < dmin) {
+        dmin = d;
+        r.seed = q;
+      }
+  }
+  return r;
+}
+
+// A component that enters the view at several places is several shafts joined (tips touching,
+// crossing): each of its pixels goes to the entry nearest to it along the component (a
+// breadth-first front from each entry's pixels on the view's edge, 4-connected). One mask per
+// entry of at least `min_entry` px; the whole component when it has fewer than two.
+std::vector<cv::Mat> splitByEntry(cv::Mat const& comp, cv::Rect const& box, FieldOfView const& fov, int border_margin, int min_entry) {
+  cv::Mat edge = cv::Mat::zeros(comp.size(), CV_8U);
+  for (int y = 0; y < comp.rows; ++y)
+    for (int x = 0; x < comp.cols; ++x)
+      if (comp.at<std::uint8_t>(y, x) && nearViewEdge(fov, cv::Point(x, y) + box.tl(), border_margin)) edge.at<std::uint8_t>(y, x) = 255;
+  cv::Mat entries, stats, centroids;
+  int const n = cv::connectedComponentsWithStats(edge, entries, stats, centroids, 8, CV_32S);
+  std::vector<int> keep;
+  for (int k = 1; k < n; ++k)
+    if (stats.at<int>(k, cv::CC_STAT_AREA) >= min_entry) keep.push_back(k);
+  if (keep.size() < 2) return {comp};
+  cv::Mat owner(comp.size(), CV_32S, cv::Scalar(-1));
+  std::vector<cv::Point> front;
+  for (int y = 0; y < comp.rows; ++y)
+    for (int x = 0; x < comp.cols; ++x)
+      if (int const e = entries.at<int>(y, x); e > 0) {
+        auto const it = std::find(keep.begin(), keep.end(), e);
+        if (it == keep.end()) continue;
+        owner.at<int>(y, x) = static_cast<int>(it - keep.begin());
+        front.emplace_back(x, y);
+      }
+  for (std::size_t i = 0; i < front.size(); ++i) {
+    cv::Point const q = front[i];
+    for (cv::Point const d : {cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
+      cv::Point const r = q + d;
+      if (r.x < 0 || r.y < 0 || r.x >= comp.cols || r.y >= comp.rows || !comp.at<std::uint8_t>(r) || owner.at<int>(r) >= 0) continue;
+      owner.at<int>(r) = owner.at<int>(q);
+      front.push_back(r);
+    }
+  }
+  std::vector<cv::Mat> out;
+  for (std::size_t k = 0; k < keep.size(); ++k) out.push_back(owner == static_cast<int>(k));
+  return out;
+}
+
+}  // namespace
+
 std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
                                         LearnedDetectorParams const& params, int border_margin) {
   CV_Assert(shaft_probability.type() == CV_32F && !fov.mask.empty());
@@ -102,52 +190,13 @@ std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldO
   int const n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
   std::vector<Region> out;
   for (int k = 1; k < n; ++k) {
-    int const area = stats.at<int>(k, cv::CC_STAT_AREA);
-    if (area < params.min_area) continue;
+    if (stats.at<int>(k, cv::CC_STAT_AREA) < params.min_area) continue;
     cv::Rect const box(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
                        stats.at<int>(k, cv::CC_STAT_HEIGHT));
-    cv::Mat const comp = labels(box) == k;
-    std::vector<std::vector<cv::Point>> contours;
-    cv::findContours(comp, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, box.tl());
-    if (contours.empty()) continue;
-    auto const longest = std::max_element(contours.begin(), contours.end(),
-                                          [](auto const& a, auto const& b) { return a.size() < b.size(); });
-    Region r;
-    r.boundary = std::move(*longest);
-    r.box = box;
-    r.area = area;
-    // The entry: the middle of the longest run of boundary points on the view's edge.
-    auto const& B = r.boundary;
-    int const m = static_cast<int>(B.size());
-    std::vector<char> edge(static_cast<std::size_t>(m));
-    for (int i = 0; i < m; ++i) edge[i] = nearViewEdge(fov, B[i], border_margin);
-    int best_len = 0, best_mid = -1;
-    int const start = static_cast<int>(std::find(edge.begin(), edge.end(), 0) - edge.begin());  // a point off the edge
-    if (start < m)
-      for (int j = 0, len = 0; j <= m; ++j) {
-        int const i = (start + j) % m;
-        if (j < m && edge[i]) {
-          ++len;
-          continue;
-        }
-        if (len > best_len) {
-          best_len = len;
-          best_mid = (start + j - (len + 1) / 2) % m;
-        }
-        len = 0;
-      }
-    if (best_mid >= 0) {
-      r.seed = B[best_mid];
-    } else {  // not on the edge (or wholly on it): its point nearest to the edge
-      r.seed = B.front();
-      float dmin = std::numeric_limits<float>::max();
-      for (cv::Point const& q : B)
-        if (float const d = fov.depth.empty() ? 0.f : fov.depth.at<float>(q); d < dmin) {
-          dmin = d;
-          r.seed = q;
-        }
-    }
-    out.push_back(std::move(r));
+    // (an entry as wide as the thinnest shaft the fit accepts, at the processing scale)
+    for (cv::Mat const& part : splitByEntry(labels(box) == k, box, fov, border_margin, 3))
+      if (cv::countNonZero(part) >= params.min_area)
+        if (auto r = maskRegion(part, box, fov, border_margin)) out.push_back(std::move(*r));
   }
   // Largest first: the contour fit claims in this order.
   std::sort(out.begin(), out.end(), [](Region const& a, Region const& b) { return a.area > b.area; });
@@ -203,7 +252,8 @@ SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, Conto
   return fit;
 }
 
-ContourFit maskContour(SideFit const& sides, ContourLinesParams const& params, double sigma_floor_px) {
+ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
+                       double sigma_floor_px) {
   ContourFit fit;
   auto reject = [&](ContourRejection r) {
     fit.rejection = r;
@@ -232,7 +282,13 @@ ContourFit maskContour(SideFit const& sides, ContourLinesParams const& params, d
   c = *fitted;
   ImageLine const ax = imageAxis(c);
   c.entry_px = footOnLine(ax, c.entry_px);
-  c.tip_px = footOnLine(ax, c.tip_px);
+  Eigen::Vector2d const u = (footOnLine(ax, c.tip_px) - c.entry_px).normalized();
+  double t_tip = u.dot(c.tip_px - c.entry_px);
+  for (cv::Point const& q : region.boundary) {  // the region's end between the lines (its jaws are another class)
+    Eigen::Vector3d const x = toFullRes(Eigen::Vector2d(q.x, q.y), scale).homogeneous();
+    if (c.lines[0].dot(x) >= -scale && c.lines[1].dot(x) >= -scale) t_tip = std::max(t_tip, u.dot(x.head<2>() - c.entry_px));
+  }
+  c.tip_px = c.entry_px + t_tip * u;
   double const length = (c.tip_px - c.entry_px).norm();
   double const w_entry = shaftWidthAt(c, c.entry_px), w_tip = shaftWidthAt(c, c.tip_px);
   if (c.residual_px > params.max_residual_px) return reject(ContourRejection::kResidual);

@@ -645,7 +645,7 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
     } else {
       // The lines on the frame's edges where they are the mask's sides, else on the mask's sides.
       ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
-      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) f = maskContour(sides, params_.contours, mask_floor_px);
+      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) f = maskContour(sides, region, scale, params_.contours, mask_floor_px);
       if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
       else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
       if (f.contour && f.rejection == ContourRejection::kNone) fit = std::move(f);

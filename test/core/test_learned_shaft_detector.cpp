@@ -148,19 +148,19 @@ TEST(LearnedShaftDetector, ProposalAndSidesOfAnExactMask) {
   // An empty mask proposes nothing.
   EXPECT_TRUE(proposeShaftRegions(cv::Mat::zeros(120, 160, CV_32F), fov, lp, 2).empty());
   // The contour on the mask's sides: both lines, ordered, the shaft between them, the checks passed.
-  ContourFit const fit = maskContour(s, cp, 1.0);
+  ContourFit const fit = maskContour(s, regions[0], 2, cp, 1.0);
   ASSERT_TRUE(fit.contour) << toString(fit.rejection);
   Eigen::Vector3d const inside(100, 219.5, 1);
   EXPECT_GT(fit.contour->lines[0].dot(inside), 0.0);
   EXPECT_GT(fit.contour->lines[1].dot(inside), 0.0);
   EXPECT_NEAR(fit.contour->entry_px.y(), 219.5, 3.0);
-  EXPECT_GT(fit.contour->tip_px.x(), fit.contour->entry_px.x() + 100.0);  // walking right from the left border
+  EXPECT_NEAR(fit.contour->tip_px.x(), 2 * 199 + 0.5, 3.0);  // the strip's end, walking right from the left border
   EXPECT_GT(fit.contour->line_covariances[0].trace(), 0.0);
   EXPECT_EQ(fit.edges[0].size() + fit.edges[1].size(), static_cast<std::size_t>(fit.edge_points));
   // Too thin to be a shaft: refused, saying why.
   ContourLinesParams wide = cp;
   wide.min_width_px = 60.0;
-  EXPECT_EQ(maskContour(s, wide, 1.0).rejection, ContourRejection::kTooThin);
+  EXPECT_EQ(maskContour(s, regions[0], 2, wide, 1.0).rejection, ContourRejection::kTooThin);
 }
 
 TEST(LearnedShaftDetector, DetectorSwitchFindsTheRenderedShafts) {

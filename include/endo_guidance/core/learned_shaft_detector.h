@@ -49,9 +49,11 @@ class ShaftNet {
 };
 
 /// The learned shaft detector's proposals: the connected components of the network's shaft mask
-/// (processing scale, inside the field of view), each as a Region whose seed is the middle of its
-/// longest run on the view's border (the entry), or, for a component that does not reach the
-/// border, its boundary point nearest to the border. maskSides() gives each one's side pair and
+/// (processing scale, inside the field of view), a component that enters the view at several
+/// places split between its entries (each pixel to the entry nearest along the component: shafts
+/// whose tips touch, or that cross), each as a Region whose seed is the middle of its longest run
+/// on the view's border (the entry), or, for a component that does not reach the border, its
+/// boundary point nearest to the border. maskSides() gives each one's side pair and
 /// the contour fit (refineContour()) turns it into sub-pixel lines as it does the grown regions'.
 std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
                                         LearnedDetectorParams const& params, int border_margin);
@@ -68,10 +70,12 @@ SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, Conto
 /// The contour on the mask's own sides, where the frame has no edge that agrees with them (a
 /// grey shaft on pale tissue, a printed band along the shaft): the side pair's lines refitted by
 /// least squares to its points (rectifyContour(), identity mapping) with `sigma_floor_px` as the
-/// systematic floor of their covariance, ordered as refineContour() orders them, and the same
+/// systematic floor of their covariance, ordered as refineContour() orders them, the tip at the
+/// region's farthest point between them along their bisector, and the same
 /// shape checks on length, width, elongation, widening and the angle between the lines.
 /// ContourFit::edges: the side points behind each line (contour order).
-ContourFit maskContour(SideFit const& sides, ContourLinesParams const& params, double sigma_floor_px);
+ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
+                       double sigma_floor_px);
 
 /// Whether each of the contour's lines lies within gate_px (median) of a different side of the
 /// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
