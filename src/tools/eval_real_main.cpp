@@ -1,11 +1,14 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 //
 // endo_guidance_eval_real: accuracy of the segmentation on the shared real data (never copied
-// into the repository). Skips, saying so, when the data folder is absent (exit 0).
+// into the repository), with either detector (--detector). Skips, saying so, when the data folder
+// is absent (exit 77: ctest's SKIP_RETURN_CODE).
 //
-//   in-vivo stills (EndoVis'15 rigid, OP1+OP2, 80 images 640x480): shaft recall, false shafts per
-//   image, and the distance of each matched shaft's mask boundary to its contour line.
-//   robotic sequences (EndoVis'15 robotic, 720x576): image-axis error against the annotated
+//   in-vivo stills (EndoVis'15 rigid, OP1-OP3, 120 images 640x480, --sites): the strict scoring
+//   (shaft_scoring.h) per operation, and beside it the earlier count: shaft recall (half of a
+//   detection's strip on the mask), false shafts per image, the mask boundary's distance to the lines.
+//   robotic sequences (EndoVis'15 robotic, 720x576): the strict scoring against the mask videos
+//   and the annotated axes (both points within 40 px); image-axis error against the annotated
 //   shaft axes (ShaftPoint -> EndPoint) on the annotated frames; the insertion points the
 //   pipeline discovers; and per annotated tool, its trocar's image as the common point of its
 //   annotated and of its detected image axes, and its 3-D trocar from its detections' axes

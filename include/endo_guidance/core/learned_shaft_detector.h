@@ -17,7 +17,7 @@ std::string defaultShaftModel();
 
 struct LearnedDetectorParams {
   std::string model;               ///< the model's YAML (input size, normalisation, ONNX file); empty: defaultShaftModel()
-  int threads = 1;                 ///< OpenCV DNN threads
+  int threads = 1;                 ///< OpenCV threads (cv::setNumThreads(): process-wide)
   double shaft_probability = 0.5;  ///< a pixel is shaft where the network gives at least this
   int min_area = 40;               ///< processing px: smaller mask components are not proposed
 };
@@ -32,7 +32,8 @@ class ShaftNet {
   ~ShaftNet();
   ShaftNet(ShaftNet const&) = delete;
   ShaftNet& operator=(ShaftNet const&) = delete;
-  /// Class logits (CV_32F, 1 x classes x height x width) of one BGR frame, resized to the input.
+  /// Class logits (CV_32F, 1 x classes x height x width) of one BGR frame, resized to the input
+  /// (the network's own buffer: valid until the next call).
   cv::Mat logits(cv::Mat const& bgr);
   /// The shaft class's softmax probability (CV_32F, input size) of one BGR frame.
   cv::Mat shaftProbability(cv::Mat const& bgr);
