@@ -181,8 +181,8 @@ std::vector<cv::Mat> splitByEntry(cv::Mat const& comp, cv::Rect const& box, Fiel
 std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
                                         LearnedDetectorParams const& params, int border_margin) {
   CV_Assert(shaft_probability.type() == CV_32F && !fov.mask.empty());
-  cv::Mat p, mask;
-  cv::resize(shaft_probability, p, fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  cv::Mat p = shaft_probability, mask;
+  if (p.size() != fov.mask.size()) cv::resize(shaft_probability, p, fov.mask.size(), 0, 0, cv::INTER_LINEAR);
   cv::compare(p, params.shaft_probability, mask, cv::CMP_GE);
   mask &= fov.mask;
   cv::morphologyEx(mask, mask, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(3, 3)));

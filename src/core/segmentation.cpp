@@ -626,7 +626,9 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
   SegmentationResult res;
   res.scale = scale;
   cv::Mat const prob = net_->shaftProbability(bgr);
-  res.regions = proposeShaftRegions(prob, fov_, params_.learned, params_.contours.border_margin);
+  cv::Mat p;  // at the processing scale
+  cv::resize(prob, p, fov_.mask.size(), 0, 0, cv::INTER_LINEAR);
+  res.regions = proposeShaftRegions(p, fov_, params_.learned, params_.contours.border_margin);
   std::vector<std::size_t> contour_region;
   labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
   // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its
@@ -674,10 +676,7 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
   };
   drop(narrowerDuplicates(res.contours));
   drop(overlappingDuplicates(res.contours));
-  // The feature image for overlays: low on shafts, as the colour feature.
-  cv::Mat p;
-  cv::resize(prob, p, fov_.mask.size(), 0, 0, cv::INTER_LINEAR);
-  p.convertTo(filtered_, CV_8U, -255.0, 255.0);
+  p.convertTo(filtered_, CV_8U, -255.0, 255.0);  // the feature image for overlays: low on shafts, as the colour feature
   startTracks(res, true, bgr, {});
   return res;
 }

@@ -50,7 +50,7 @@ class ShaftNet {
 };
 
 /// The learned shaft detector's proposals: the connected components of the network's shaft mask
-/// (processing scale, inside the field of view), a component that enters the view at several
+/// (its probability resized to the view's size, bilinear, unless it has it; inside the view), a component that enters the view at several
 /// places split between its entries (each pixel to the entry nearest along the component: shafts
 /// whose tips touch, or that cross), each as a Region whose seed is the middle of its longest run
 /// on the view's border (the entry), or, for a component that does not reach the border, its
