@@ -178,24 +178,24 @@ std::vector<cv::Mat> splitByEntry(cv::Mat const& comp, cv::Rect const& box, Fiel
 
 }  // namespace
 
-std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
-                                        LearnedDetectorParams const& params, int border_margin) {
+std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov, int min_area,
+                                        int border_margin) {
   CV_Assert(shaft_probability.type() == CV_32F && !fov.mask.empty());
   cv::Mat p = shaft_probability, mask;
   if (p.size() != fov.mask.size()) cv::resize(shaft_probability, p, fov.mask.size(), 0, 0, cv::INTER_LINEAR);
-  cv::compare(p, params.shaft_probability, mask, cv::CMP_GE);
+  cv::compare(p, 0.5, mask, cv::CMP_GE);
   mask &= fov.mask;
   cv::morphologyEx(mask, mask, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(3, 3)));
   cv::Mat labels, stats, centroids;
   int const n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
   std::vector<Region> out;
   for (int k = 1; k < n; ++k) {
-    if (stats.at<int>(k, cv::CC_STAT_AREA) < params.min_area) continue;
+    if (stats.at<int>(k, cv::CC_STAT_AREA) < min_area) continue;
     cv::Rect const box(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
                        stats.at<int>(k, cv::CC_STAT_HEIGHT));
     // (an entry as wide as the thinnest shaft the fit accepts, at the processing scale)
     for (cv::Mat const& part : splitByEntry(labels(box) == k, box, fov, border_margin, 3))
-      if (cv::countNonZero(part) >= params.min_area)
+      if (cv::countNonZero(part) >= min_area)
         if (auto r = maskRegion(part, box, fov, border_margin)) out.push_back(std::move(*r));
   }
   // Largest first: the contour fit claims in this order.

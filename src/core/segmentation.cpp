@@ -628,7 +628,7 @@ SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int sc
   cv::Mat const prob = net_->shaftProbability(bgr);
   cv::Mat p;  // at the processing scale
   cv::resize(prob, p, fov_.mask.size(), 0, 0, cv::INTER_LINEAR);
-  res.regions = proposeShaftRegions(p, fov_, params_.learned, params_.contours.border_margin);
+  res.regions = proposeShaftRegions(p, fov_, params_.regions.min_area, params_.contours.border_margin);
   std::vector<std::size_t> contour_region;
   labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
   // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its

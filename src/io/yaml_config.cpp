@@ -97,8 +97,6 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"segmentation/detector", Setter([&S](YAML::Node const& n) { S.detector = detectorFromString(n.as<std::string>()); })},
       {"segmentation/learned_model", str(S.learned.model)},
       {"segmentation/learned_threads", i(S.learned.threads)},
-      {"segmentation/learned_shaft_probability", d(S.learned.shaft_probability)},
-      {"segmentation/learned_min_area", i(S.learned.min_area)},
       {"segmentation/processing_width", i(S.processing_width)},
       {"segmentation/hue_origin_deg", d(S.feature.hue_origin_deg)},
       {"segmentation/sigma_radius", i(S.sigma_radius)},
@@ -192,8 +190,6 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   };
   need(p.radius > 0.0 && p.radius < 0.05, "radius", "in (0, 0.05) m");
   need(S.learned.threads >= 1 && S.learned.threads <= 64, "segmentation/learned_threads", "in [1, 64]");
-  need(S.learned.shaft_probability > 0.0 && S.learned.shaft_probability < 1.0, "segmentation/learned_shaft_probability", "in (0, 1)");
-  need(S.learned.min_area >= 1, "segmentation/learned_min_area", ">= 1 px");
   need(S.processing_width >= 32, "segmentation/processing_width", ">= 32 px");
   need(S.sigma_radius >= 0 && S.sigma_radius <= 8, "segmentation/sigma_radius", "in [0, 8]");
   need(S.sigma_delta >= 0 && S.sigma_delta <= 255, "segmentation/sigma_delta", "in [0, 255]");

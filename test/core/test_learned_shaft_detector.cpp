@@ -130,8 +130,7 @@ TEST(LearnedShaftDetector, ProposalAndSidesOfAnExactMask) {
   cv::Mat prob = cv::Mat::zeros(120, 160, CV_32F);  // at half the view's size, as a network's
   cv::rectangle(prob, cv::Rect(0, 50, 100, 10), cv::Scalar(1.0), cv::FILLED);
   prob.at<float>(10, 10) = 1.0f;  // a speck: below min_area
-  LearnedDetectorParams lp;
-  auto const regions = proposeShaftRegions(prob, fov, lp, 2);
+  auto const regions = proposeShaftRegions(prob, fov, 40, 2);
   ASSERT_EQ(regions.size(), 1u);
   EXPECT_LE(regions[0].seed.x, 4);             // the entry on the left border
   EXPECT_NEAR(regions[0].seed.y, 109.5, 3.0);  // in the middle of its run
@@ -146,7 +145,7 @@ TEST(LearnedShaftDetector, ProposalAndSidesOfAnExactMask) {
   double const y0 = -s.lines[0].z() / s.lines[0].y(), y1 = -s.lines[1].z() / s.lines[1].y();
   EXPECT_NEAR(std::abs(y1 - y0), 2.0 * 19.0, 3.0);  // the boundary rows, 19 processing px apart
   // An empty mask proposes nothing.
-  EXPECT_TRUE(proposeShaftRegions(cv::Mat::zeros(120, 160, CV_32F), fov, lp, 2).empty());
+  EXPECT_TRUE(proposeShaftRegions(cv::Mat::zeros(120, 160, CV_32F), fov, 40, 2).empty());
   // The contour on the mask's sides: both lines, ordered, the shaft between them, the checks passed.
   ContourFit const fit = maskContour(s, regions[0], 2, cp, 1.0);
   ASSERT_TRUE(fit.contour) << toString(fit.rejection);

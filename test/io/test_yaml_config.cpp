@@ -94,8 +94,6 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   EXPECT_EQ(shipped.segmentation.detector, defaults.segmentation.detector);
   EXPECT_EQ(shipped.segmentation.learned.model, defaults.segmentation.learned.model);
   EXPECT_EQ(shipped.segmentation.learned.threads, defaults.segmentation.learned.threads);
-  EXPECT_EQ(shipped.segmentation.learned.shaft_probability, defaults.segmentation.learned.shaft_probability);
-  EXPECT_EQ(shipped.segmentation.learned.min_area, defaults.segmentation.learned.min_area);
   EXPECT_EQ(shipped.segmentation.level_memory_px, defaults.segmentation.level_memory_px);
   EXPECT_EQ(shipped.segmentation.full_search_every, defaults.segmentation.full_search_every);
   EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
@@ -140,5 +138,4 @@ TEST(YamlConfig, DetectorSwitch) {
   PipelineParams q;
   EXPECT_THROW(io::loadPipelineYaml(write("e.yaml", "segmentation:\n  detector: hough\n"), q), std::runtime_error);
   EXPECT_THROW(io::loadPipelineYaml(write("t.yaml", "segmentation:\n  learned_threads: 0\n"), q), std::runtime_error);
-  EXPECT_THROW(io::loadPipelineYaml(write("q.yaml", "segmentation:\n  learned_shaft_probability: 1.5\n"), q), std::runtime_error);
 }

@@ -18,8 +18,6 @@ std::string defaultShaftModel();
 struct LearnedDetectorParams {
   std::string model;               ///< the model's YAML (input size, normalisation, ONNX file); empty: defaultShaftModel()
   int threads = 1;                 ///< OpenCV threads (cv::setNumThreads(): process-wide)
-  double shaft_probability = 0.5;  ///< a pixel is shaft where the network gives at least this
-  int min_area = 40;               ///< processing px: smaller mask components are not proposed
 };
 
 /// The per-pixel shaft network, run by OpenCV's DNN module on the CPU (no training framework at
@@ -56,8 +54,10 @@ class ShaftNet {
 /// on the view's border (the entry), or, for a component that does not reach the border, its
 /// boundary point nearest to the border. maskSides() gives each one's side pair and
 /// the contour fit (refineContour()) turns it into sub-pixel lines as it does the grown regions'.
-std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov,
-                                        LearnedDetectorParams const& params, int border_margin);
+/// A pixel is shaft where p >= 1/2 (the network's decision against the other two classes'
+/// share); components of fewer than min_area pixels are not proposed.
+std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov, int min_area,
+                                        int border_margin);
 
 /// The side pair of a mask component, for refineContour(): its boundary points off the view's
 /// edge (3 border_margin), less the far end (within one width of it: the tip), split by the component's principal
