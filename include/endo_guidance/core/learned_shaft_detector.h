@@ -48,24 +48,21 @@ class ShaftNet {
 };
 
 /// The learned shaft detector's proposals: the connected components of the network's shaft mask
-/// (its probability resized to the view's size, bilinear, unless it has it; inside the view), a component that enters the view at several
-/// places split between its entries (each pixel to the entry nearest along the component: shafts
-/// whose tips touch, or that cross), each as a Region whose seed is the middle of its longest run
-/// on the view's border (the entry), or, for a component that does not reach the border, its
-/// boundary point nearest to the border. maskSides() gives each one's side pair and
-/// the contour fit (refineContour()) turns it into sub-pixel lines as it does the grown regions'.
-/// A pixel is shaft where p >= 1/2 (the network's decision against the other two classes'
-/// share); components of fewer than min_area pixels are not proposed.
+/// (p >= 1/2 on the probability resized to the view's size, inside the view; fewer than min_area
+/// pixels dropped). A component that enters the view at several places (shafts whose tips touch,
+/// or that cross) is split between its entries, each pixel to the entry nearest along the
+/// component. Each part is a Region seeded at the middle of its longest run on the view's border
+/// (its entry), or, off the border, at its boundary point nearest to it.
 std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov, int min_area,
                                         int border_margin);
 
 /// The side pair of a mask component, for refineContour(): its boundary points off the view's
-/// edge (3 border_margin), less the far end (within one width of it: the tip), split by the component's principal
-/// axis (second moments of its outline), one LMedS line per side ([Rousseeuw87]), oriented toward
-/// the shaft. A mask's outline is no chain of straight runs from the entry (the network's edge
-/// wanders by a few px): the principal axis splits it where following it from the entry does not.
-/// Rejection kTooFewPoints when a side has fewer than min_side_points, kNotStraight when under
-/// min_inlier_fraction of them lie on its line.
+/// edge (3 border_margin) and short of the far end by one width (the tip), split by the
+/// component's principal axis (second moments of its outline), one LMedS line per side
+/// ([Rousseeuw87]), oriented toward the shaft. A mask's outline is no chain of straight runs from
+/// the entry (the network's edge wanders by a few px): the principal axis splits it where
+/// following it from the entry does not. Rejection kTooFewPoints when a side has fewer than
+/// min_side_points, kNotStraight when under min_inlier_fraction of them lie on its line.
 SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
 
 /// The contour on the mask's own sides, where the frame has no edge that agrees with them (a
