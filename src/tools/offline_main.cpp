@@ -8,6 +8,8 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
@@ -29,7 +31,9 @@
 #include <string>
 #include <vector>
 
+#include "endo_guidance/core/learned_shaft_detector.h"
 #include "endo_guidance/core/pipeline.h"
+#include "endo_guidance_git_revision.h"
 #include "endo_guidance/io/yaml_config.h"
 
 namespace fs = std::filesystem;
@@ -43,7 +47,7 @@ void usage(std::FILE* f) {
                "usage: endo_guidance_offline [--camera CAMERA.yaml] --radius METRES [--params PARAMS.yaml]\n"
                "                             [--output OUT.jsonl] [--overlay DIR|VIDEO] [--image-topic TOPIC]\n"
                "                             [--fps HZ] [--truth TRUTH.yaml] [--independent] [--quiet]\n"
-               "                             [--detector colour|learned] [--model MODEL.yaml] INPUT...\n"
+               "                             [--detector colour|learned] [--model MODEL.yaml] [--report DIR] INPUT...\n"
                "  INPUT: image files, a directory of images (sorted by name), a video file, or a bag\n"
                "         (--image-topic; its camera_info is used when present).\n"
                "  CAMERA.yaml: ROS camera_info YAML (camera_calibration_parsers format); distorted\n"
@@ -55,7 +59,10 @@ void usage(std::FILE* f) {
                "         earlier frame (seed levels, tracks, insertion points) before it; by default the\n"
                "         frames are one video, in order.\n"
                "  --truth: YAML 'trocars: [[x, y, z], ...]' (metres, camera frame): errors printed at the end.\n"
-               "  --detector, --model: segmentation/detector and segmentation/learned_model (over --params).\n");
+               "  --detector, --model: segmentation/detector and segmentation/learned_model (over --params).\n"
+               "  --report: a run report in DIR: index.html with plots (detections over time, each trocar\n"
+               "         converging with its 1-sigma band, the imaged axes in (theta, rho), the worst frames'\n"
+               "         overlays, parameters and versions), frames.jsonl and run.yaml (docs/report.md).\n");
 }
 
 // ------------------------------------------------------------------ frame sources
@@ -263,10 +270,59 @@ std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
   return j.str();
 }
 
+// ------------------------------------------------------------------ report
+constexpr std::size_t kWorstFrames = 6;
+
+struct WorstFrame {
+  double residual_px;
+  long frame;
+  std::string source;
+  cv::Mat overlay;
+};
+
+std::string yamlStr(std::string const& s) { return str(s); }  // a JSON string is a YAML scalar
+
+// run.yaml: what the report states about the run (inputs, camera, parameters, versions).
+void writeRunYaml(fs::path const& dir, std::vector<std::string> const& inputs, Eigen::Matrix3d const& K, cv::Size size,
+                  PipelineParams const& params, std::string const& params_path, long frames, long rejected, double seconds) {
+  std::ofstream y(dir / "run.yaml");
+  if (!y) throw std::runtime_error("cannot write '" + (dir / "run.yaml").string() + "'");
+  y << "program: endo_guidance_offline\n"
+    << "endo_guidance_version: " << ENDO_GUIDANCE_VERSION << "\n"
+    << "git_revision: " << yamlStr(ENDO_GUIDANCE_GIT_REVISION) << "\n"
+    << "opencv_version: " << yamlStr(CV_VERSION) << "\n"
+    << "eigen_version: " << EIGEN_WORLD_VERSION << "." << EIGEN_MAJOR_VERSION << "." << EIGEN_MINOR_VERSION << "\n"
+    << "inputs:\n";
+  for (auto const& in : inputs) y << "  - " << yamlStr(fs::absolute(in).string()) << "\n";
+  y << "image_size: [" << size.width << ", " << size.height << "]\n"
+    << "camera_matrix: [" << K(0, 0) << ", " << K(0, 1) << ", " << K(0, 2) << ", " << K(1, 0) << ", " << K(1, 1) << ", " << K(1, 2)
+    << ", " << K(2, 0) << ", " << K(2, 1) << ", " << K(2, 2) << "]\n"
+    << "parameters_file: " << yamlStr(params_path.empty() ? "(built-in defaults, as config/pipeline.yaml)" : fs::absolute(params_path).string()) << "\n"
+    << "radius_m: " << params.radius << "\n"
+    << "detector: " << io::toString(params.segmentation.detector) << "\n";
+  if (params.segmentation.detector == SegmentationParams::Detector::kLearned)
+    y << "learned_model: " << yamlStr(params.segmentation.learned.model.empty() ? defaultShaftModel() : params.segmentation.learned.model)
+      << "\n";
+  y << "frames: " << frames << "\nrejected_frames: " << rejected << "\nprocessing_seconds: " << seconds << "\n";
+}
+
+// The plots and index.html come from scripts/run_report.py (matplotlib).
+void makeReport(fs::path const& dir) {
+  std::string const script = std::string(ENDO_GUIDANCE_SCRIPTS_DIR) + "/run_report.py";
+  std::string const d = dir.string();
+  char const* argv[] = {"/usr/bin/python3", script.c_str(), d.c_str(), nullptr};
+  pid_t pid;
+  if (posix_spawn(&pid, argv[0], nullptr, nullptr, const_cast<char* const*>(argv), environ) != 0)
+    throw std::runtime_error("report: cannot run /usr/bin/python3 " + script);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) throw std::runtime_error("report: " + script + " failed (its message above)");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path, detector, model;
+  std::string camera_path, params_path, output, overlay, topic = "/camera/image_raw", truth_path, detector, model, report;
   double radius = -1.0, fps = 25.0;
   bool quiet = false, independent = false;
   std::vector<std::string> inputs;
@@ -289,6 +345,7 @@ int main(int argc, char** argv) {
     else if (a == "--image-topic") topic = value();
     else if (a == "--fps") fps = std::atof(value().c_str());
     else if (a == "--truth") truth_path = value();
+    else if (a == "--report") report = value();
     else if (a == "--quiet") quiet = true;
     else if (a == "--independent") independent = true;
     else if (a == "-h" || a == "--help") {
@@ -365,12 +422,19 @@ int main(int argc, char** argv) {
     }
     Pipeline pipe(K, cv::Size(cam->width, cam->height), params);
 
-    std::ofstream file;
+    std::ofstream file, report_file;
     std::ostream* js = &std::cout;
     if (!output.empty()) {
       file.open(output);
       if (!file) throw std::runtime_error("cannot write '" + output + "'");
       js = &file;
+    }
+    std::vector<WorstFrame> worst;  // the kWorstFrames frames of largest line residual
+    if (!report.empty()) {
+      fs::create_directories(fs::path(report) / "worst");
+      for (auto const& e : fs::directory_iterator(fs::path(report) / "worst")) fs::remove(e.path());
+      report_file.open(fs::path(report) / "frames.jsonl");
+      if (!report_file) throw std::runtime_error("cannot write '" + report + "/frames.jsonl'");
     }
     cv::VideoWriter writer;
     bool const overlay_video = !overlay.empty() && (fs::path(overlay).extension() == ".avi" ||
@@ -395,12 +459,22 @@ int main(int argc, char** argv) {
           if (independent) pipe.reset();
           out = pipe.process(img, f.stamp);
           if (out.error.empty()) last = out;
-          if (!overlay.empty() && out.error.empty()) {
+          double residual = -1.0;
+          for (auto const& o : out.instruments) residual = std::max(residual, o.contour.residual_px);
+          bool const is_worst = !report.empty() && residual >= 0.0 &&
+                                (worst.size() < kWorstFrames || residual > worst.back().residual_px);
+          if ((!overlay.empty() || is_worst) && out.error.empty()) {
             cv::Mat ov = img.clone();
             std::vector<Eigen::Vector3d> ti;
             for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
             drawSegmentationOverlay(ov, out.segmentation, ti);
-            if (overlay_video) {
+            if (is_worst) {
+              if (worst.size() == kWorstFrames) worst.pop_back();
+              worst.push_back({residual, k, f.source, ov.clone()});
+              std::sort(worst.begin(), worst.end(), [](auto const& a, auto const& b) { return a.residual_px > b.residual_px; });
+            }
+            if (overlay.empty()) {
+            } else if (overlay_video) {
               if (!writer.isOpened())
                 writer.open(overlay, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, ov.size());
               writer.write(ov);
@@ -415,7 +489,9 @@ int main(int argc, char** argv) {
           ++bad;
           std::fprintf(stderr, "%sframe %ld (%s): %s -- skipped\n", tty ? "\n" : "", k, f.source.c_str(), out.error.c_str());
         }
-        *js << frameJson(k, f, out) << "\n";
+        std::string const line = frameJson(k, f, out);
+        if (report.empty() || !output.empty()) *js << line << "\n";
+        if (!report.empty()) report_file << line << "\n";
         ++k;
         if (tty) {
           double const el = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -427,6 +503,22 @@ int main(int argc, char** argv) {
     }
     if (tty) std::fprintf(stderr, "\n");
     js->flush();
+    if (!report.empty()) {
+      report_file.close();
+      double const seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      writeRunYaml(report, inputs, K, cv::Size(cam->width, cam->height), params, params_path, k, bad, seconds);
+      std::ofstream w(fs::path(report) / "worst" / "worst.yaml");
+      for (auto const& x : worst) {
+        char name[40];
+        std::snprintf(name, sizeof name, "frame_%06ld.png", x.frame);
+        cv::imwrite((fs::path(report) / "worst" / name).string(), x.overlay);
+        w << "- {frame: " << x.frame << ", source: " << yamlStr(x.source) << ", residual_px: " << x.residual_px << ", image: " << name
+          << "}\n";
+      }
+      w.close();
+      makeReport(report);
+      if (!quiet) std::fprintf(stderr, "report: %s\n", (fs::absolute(report) / "index.html").c_str());
+    }
     if (!quiet) {
       std::fprintf(stderr, "%ld frames (%ld rejected); insertion points:\n", k, bad);
       std::vector<Eigen::Vector3d> truth;
