@@ -14,7 +14,7 @@ PKGS=(
   libdiagnostic-msgs-dev ros-diagnostic-msgs libstd-srvs-dev ros-std-srvs
   libnodelet-dev libnodeletlib-dev libnodeletlib-tools pluginlib-dev
   libimage-transport-dev libcv-bridge-dev libimage-geometry-dev libcamera-calibration-parsers-dev
-  libcamera-info-manager-dev ros-camera-calibration python3-cv-bridge python3-image-geometry python3-diagnostic-msgs
+  libcamera-info-manager-dev ros-camera-calibration python3-cv-bridge python3-image-geometry python3-diagnostic-msgs python3-tf2-msgs
   libtf2-ros-dev libtf2-geometry-msgs-dev libtf2-eigen-dev
   libdiagnostic-updater-dev libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   librosbag-dev python3-rosbag python3-rostopic python3-sensor-msgs rosbash ros-core
