@@ -83,7 +83,7 @@ def plot_detections(rows, out):
     good = [r for r in rows if "error" not in r]
     t = [r["stamp"] - t0 for r in good]
     fig, ax = plt.subplots(figsize=(10, 3.2), dpi=100)
-    ax.step(t, [len(r["instruments"]) for r in good], where="post", color=COLOURS[0], label="shafts detected")
+    ax.step(t, [len(r["instruments"]) for r in good], where="post", color=COLOURS[0], lw=3.0, label="shafts detected")
     ax.step(t, [sum(1 for o in r["instruments"] if o["insertion_point"] >= 0) for r in good], where="post",
             color=COLOURS[1], label="attached to a trocar")
     bad = [r["stamp"] - t0 for r in rows if "error" in r and r.get("stamp") is not None]
