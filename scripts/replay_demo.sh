@@ -19,6 +19,20 @@ roslaunch -p "${ROS_MASTER_URI##*:}" endo_guidance replay.launch bag:="$DEMO/sur
   >"$ROS_HOME/replay_demo.log" 2>&1 &
 launch=$!
 trap '{ kill -INT $launch; wait $launch; } 2>/dev/null || true' EXIT
-sleep 2
-/usr/bin/python3 scripts/report_trocars.py "$DEMO/surgery.truth.yaml" "$DEMO/overlay.png" /endoscope "${CHECK[@]}"
+/usr/bin/python3 scripts/report_trocars.py "$DEMO/surgery.truth.yaml" "$DEMO/overlay.png" /endoscope "${CHECK[@]}" &
+report=$!
+# The launch ends when the bag does (quit_at_end); if it ends before the report, it failed.
+while kill -0 $report 2>/dev/null; do
+  if ! kill -0 $launch 2>/dev/null && kill -0 $report 2>/dev/null; then
+    sleep 1  # the report may be finishing on the last messages
+    if kill -0 $report 2>/dev/null && ! grep -q "process\[player-" "$ROS_HOME/replay_demo.log"; then
+      kill $report 2>/dev/null || true
+      echo "roslaunch failed to start (log: $ROS_HOME/replay_demo.log):" >&2
+      tail -5 "$ROS_HOME/replay_demo.log" >&2
+      exit 1
+    fi
+  fi
+  sleep 0.2
+done
+wait $report
 echo "pipeline log: $ROS_HOME/replay_demo.log"

@@ -2,11 +2,13 @@
 """Listens to the running pipeline (<camera>/insertion_points, <camera>/overlay) until the input
 stops, then prints every trocar estimate with its error against a truth YAML and saves the last
 overlay image as PNG.  Usage: report_trocars.py TRUTH.yaml OUT.png [camera] [--check TOL_MM]
-With --check, exits 1 unless every true trocar has a well-conditioned estimate within TOL_MM."""
+With --check, exits 1 unless every true trocar has a well-conditioned estimate within TOL_MM.
+Every wait is bounded: no master within 20 s, or no insertion points within 60 s, exits 1."""
 import sys
 import time
 
 import numpy as np
+import rosgraph
 import rospy
 import yaml
 from sensor_msgs.msg import Image
@@ -24,6 +26,12 @@ def main():
     truth_path, png = args[0], args[1]
     cam = args[2] if len(args) > 2 else "endoscope"
     truth = np.array(yaml.safe_load(open(truth_path))["trocars"], float)
+    # rospy.init_node waits for a master for ever: wait here, bounded, and say why it failed.
+    end = time.time() + 20.0
+    while not rosgraph.is_master_online():
+        if time.time() > end:
+            sys.exit("no ROS master at %s after 20 s (did roslaunch fail to start? see its log)" % rosgraph.get_master_uri())
+        time.sleep(0.2)
     rospy.init_node("report_trocars", anonymous=True)
     state = {"points": None, "overlay": None, "last": None, "frames": 0}
 
