@@ -41,11 +41,33 @@ std::vector<double> matrixData(YAML::Node const& n, std::string const& key, std:
 }
 }  // namespace
 
-CameraModel loadCameraYaml(std::string const& path) {
-  YAML::Node const n = loadFile(path, "camera YAML");
+CameraModel loadCameraYaml(std::string const& path) { return cameraFromYaml(loadFile(path, "camera YAML")); }
+
+CameraModel parseCameraYaml(std::string const& text) {
+  try {
+    return cameraFromYaml(YAML::Load(text));
+  } catch (YAML::Exception const& e) {
+    throw std::runtime_error(std::string("camera YAML: ") + e.what());
+  }
+}
+
+void parsePipelineYaml(std::string const& text, PipelineParams& p) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (YAML::Exception const& e) {
+    throw std::runtime_error(std::string("parameters YAML: ") + e.what());
+  }
+  auto const unknown = applyPipelineParams(root, p);
+  if (!unknown.empty()) throw std::runtime_error("parameters YAML: unknown key " + unknown.front());
+}
+
+CameraModel cameraFromYaml(YAML::Node const& n) {
+  if (!n.IsMap()) throw std::runtime_error("camera YAML: not a map of keys");
   CameraModel c;
   if (!n["image_width"] || !n["image_height"]) throw std::runtime_error("camera YAML: missing image_width/image_height");
-  c.width = n["image_width"].as<int>();
+  try {
+    c.width = n["image_width"].as<int>();
   c.height = n["image_height"].as<int>();
   auto const k = matrixData(n, "camera_matrix", 9);
   for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = k[static_cast<std::size_t>(i)];
@@ -54,6 +76,9 @@ CameraModel loadCameraYaml(std::string const& path) {
   if (n["projection_matrix"]) {
     auto const p = matrixData(n, "projection_matrix", 12);
     for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = p[static_cast<std::size_t>(i)];
+  }
+  } catch (YAML::Exception const& e) {
+    throw std::runtime_error(std::string("camera YAML: wrong value type: ") + e.what());
   }
   if (c.width <= 0 || c.height <= 0) throw std::runtime_error("camera YAML: image size must be positive");
   if (!(c.K(0, 0) > 0.0) || !(c.K(1, 1) > 0.0) || !c.K.allFinite())

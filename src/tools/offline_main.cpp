@@ -35,9 +35,11 @@
 #include "endo_guidance/core/pipeline.h"
 #include "endo_guidance_git_revision.h"
 #include "endo_guidance/io/yaml_config.h"
+#include "frame_sources.h"
 
 namespace fs = std::filesystem;
 using namespace endo_guidance::core;
+namespace tools = endo_guidance::tools;
 namespace io = endo_guidance::io;
 
 namespace {
@@ -64,130 +66,6 @@ void usage(std::FILE* f) {
                "         converging with its 1-sigma band, the imaged axes in (theta, rho), the worst frames'\n"
                "         overlays, parameters and versions), frames.jsonl and run.yaml (docs/report.md).\n");
 }
-
-// ------------------------------------------------------------------ frame sources
-struct Frame {
-  cv::Mat image;
-  std::string source;
-  double stamp = 0.0;
-  std::string error;
-};
-
-class Source {
- public:
-  virtual ~Source() = default;
-  virtual bool next(Frame& f) = 0;  // false at the end
-  virtual std::optional<io::CameraModel> camera() const { return std::nullopt; }
-  virtual long size() const { return -1; }
-};
-
-class ImageFiles : public Source {
- public:
-  ImageFiles(std::vector<std::string> files, double fps) : files_(std::move(files)), fps_(fps) {}
-  bool next(Frame& f) override {
-    if (i_ >= files_.size()) return false;
-    f = Frame{};
-    f.source = files_[i_];
-    f.stamp = static_cast<double>(i_) / fps_;
-    f.image = cv::imread(files_[i_], cv::IMREAD_COLOR);
-    if (f.image.empty()) f.error = "unreadable image";
-    ++i_;
-    return true;
-  }
-  long size() const override { return static_cast<long>(files_.size()); }
-
- private:
-  std::vector<std::string> files_;
-  double fps_;
-  std::size_t i_ = 0;
-};
-
-class Video : public Source {
- public:
-  // Frame k is stamped k / fps, the container's frame rate (`fallback_fps` when it has none).
-  // Not CAP_PROP_POS_MSEC: with the FFMPEG backend on H264 (the EndoVis robotic videos) it is
-  // the time of a frame two ahead after a read (0.08 s for frame 0 at 25 fps) and 0 after the
-  // last one, so the stamps went back to 0 at the end.
-  Video(std::string const& path, double fallback_fps) : path_(path), cap_(path) {
-    if (!cap_.isOpened()) throw std::runtime_error("cannot open video '" + path + "'");
-    double const f = cap_.get(cv::CAP_PROP_FPS);
-    fps_ = std::isfinite(f) && f > 0.0 ? f : fallback_fps;
-  }
-  bool next(Frame& f) override {
-    f = Frame{};
-    if (!cap_.read(f.image)) return false;
-    f.source = path_ + "#" + std::to_string(k_);
-    f.stamp = static_cast<double>(k_) / fps_;
-    ++k_;
-    return true;
-  }
-  long size() const override { return static_cast<long>(cap_.get(cv::CAP_PROP_FRAME_COUNT)); }
-
- private:
-  std::string path_;
-  cv::VideoCapture cap_;
-  double fps_ = 25.0;
-  long k_ = 0;
-};
-
-class Bag : public Source {
- public:
-  Bag(std::string const& path, std::string const& topic) : path_(path) {
-    bag_.open(path, rosbag::bagmode::Read);
-    view_ = std::make_unique<rosbag::View>(bag_, rosbag::TopicQuery(std::vector<std::string>{topic}));
-    if (view_->size() == 0) throw std::runtime_error("bag '" + path + "' has no messages on '" + topic + "'");
-    it_ = view_->begin();
-    // camera_info: <namespace of the image topic>/camera_info
-    std::string const info = topic.substr(0, topic.find_last_of('/')) + "/camera_info";
-    rosbag::View iv(bag_, rosbag::TopicQuery(std::vector<std::string>{info}));
-    for (auto const& m : iv) {
-      auto const ci = m.instantiate<sensor_msgs::CameraInfo>();
-      if (!ci) continue;
-      io::CameraModel c;
-      c.width = static_cast<int>(ci->width);
-      c.height = static_cast<int>(ci->height);
-      for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = ci->K[i];
-      for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = ci->P[i];
-      c.D = ci->D;
-      c.distortion_model = ci->distortion_model;
-      if (c.K(0, 0) > 0.0 && c.K(1, 1) > 0.0 && c.width > 0 && c.height > 0) camera_ = c;
-      break;
-    }
-  }
-  bool next(Frame& f) override {
-    if (it_ == view_->end()) return false;
-    f = Frame{};
-    rosbag::MessageInstance const& m = *it_;
-    f.stamp = m.getTime().toSec();
-    f.source = path_ + "#" + std::to_string(k_++);
-    try {
-      if (auto const img = m.instantiate<sensor_msgs::Image>()) {
-        f.stamp = img->header.stamp.toSec();
-        f.image = cv_bridge::toCvCopy(img, "bgr8")->image;
-      } else if (auto const cimg = m.instantiate<sensor_msgs::CompressedImage>()) {
-        f.stamp = cimg->header.stamp.toSec();
-        f.image = cv::imdecode(cimg->data, cv::IMREAD_COLOR);
-        if (f.image.empty()) f.error = "undecodable compressed image";
-      } else {
-        f.error = "message is neither sensor_msgs/Image nor CompressedImage";
-      }
-    } catch (std::exception const& e) {
-      f.error = std::string("image conversion failed: ") + e.what();
-    }
-    ++it_;
-    return true;
-  }
-  std::optional<io::CameraModel> camera() const override { return camera_; }
-  long size() const override { return static_cast<long>(view_->size()); }
-
- private:
-  std::string path_;
-  rosbag::Bag bag_;
-  std::unique_ptr<rosbag::View> view_;
-  rosbag::View::iterator it_;
-  std::optional<io::CameraModel> camera_;
-  long k_ = 0;
-};
 
 bool isImage(fs::path const& p) {
   std::string e = p.extension().string();
@@ -230,7 +108,7 @@ std::string str(std::string const& s) {
   return o + "\"";
 }
 
-std::string frameJson(long k, Frame const& f, PipelineOutput const& out) {
+std::string frameJson(long k, tools::Frame const& f, PipelineOutput const& out) {
   std::ostringstream j;
   j << "{\"frame\": " << k << ", \"source\": " << str(f.source) << ", \"stamp\": " << stampNum(f.stamp);
   if (!out.error.empty()) {
@@ -373,10 +251,10 @@ int main(int argc, char** argv) {
     if (!(params.radius > 0.0) || params.radius > 0.05) throw std::runtime_error("radius must be in (0, 0.05] m");
 
     // Sources, in order.
-    std::vector<std::unique_ptr<Source>> sources;
+    std::vector<std::unique_ptr<tools::Source>> sources;
     std::vector<std::string> images;
     auto flushImages = [&]() {
-      if (!images.empty()) sources.push_back(std::make_unique<ImageFiles>(images, fps));
+      if (!images.empty()) sources.push_back(tools::openImageFiles(images, fps));
       images.clear();
     };
     for (auto const& in : inputs) {
@@ -394,10 +272,10 @@ int main(int argc, char** argv) {
         throw std::runtime_error("input '" + in + "' does not exist");
       } else if (p.extension() == ".bag") {
         flushImages();
-        sources.push_back(std::make_unique<Bag>(in, topic));
+        sources.push_back(tools::openBag(in, topic));
       } else {
         flushImages();
-        sources.push_back(std::make_unique<Video>(in, fps));
+        sources.push_back(tools::openVideo(in, fps));
       }
     }
     flushImages();
@@ -448,7 +326,7 @@ int main(int argc, char** argv) {
     auto const start = std::chrono::steady_clock::now();
     PipelineOutput last;
     for (auto const& s : sources) {
-      Frame f;
+      tools::Frame f;
       while (s->next(f)) {
         PipelineOutput out;
         if (!f.error.empty()) {

@@ -30,10 +30,14 @@ struct CameraModel {
 /// distortion_coefficients, projection_matrix). Throws std::runtime_error with the reason
 /// (missing file or key, zero focal length, size 0) -- invalid intrinsics are never accepted.
 CameraModel loadCameraYaml(std::string const& path);
+/// The same from YAML text.
+CameraModel parseCameraYaml(std::string const& text);
 
 /// Overrides fields of `params` with the keys present in a pipeline YAML (see config/pipeline.yaml;
 /// unknown keys are an error, listed in the exception, so a typo is not silently ignored).
 void loadPipelineYaml(std::string const& path, PipelineParams& params);
+/// The same from YAML text.
+void parsePipelineYaml(std::string const& text, PipelineParams& params);
 /// segmentation/detector's values: "colour" or "learned" (std::runtime_error otherwise).
 core::SegmentationParams::Detector detectorFromString(std::string const& name);
 char const* toString(core::SegmentationParams::Detector d);
@@ -49,5 +53,7 @@ namespace endo_guidance::io {
 /// The same from a YAML tree (the nodes convert their parameter namespace to one): returns the
 /// unknown keys ("group/key") instead of throwing; throws std::runtime_error on a wrong type.
 std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& params);
+/// A camera model from a YAML tree (loadCameraYaml()'s rules).
+CameraModel cameraFromYaml(YAML::Node const& node);
 
 }  // namespace endo_guidance::io
