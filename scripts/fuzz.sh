@@ -2,6 +2,7 @@
 # Fuzzes every harness of test/fuzz with libFuzzer (clang, ASan + UBSan) for SECONDS each
 # (default 600), after replaying its seeds and its regression inputs. Builds build/fuzz first.
 #   scripts/fuzz.sh [SECONDS] [HARNESS...]     e.g. scripts/fuzz.sh 15 geometry
+#   scripts/fuzz.sh build                       only build them (scripts/setup.sh does)
 # The growing corpus stays in build/fuzz/corpus/<harness>; a crash is saved in
 # build/fuzz/crashes/ and fails the script (make it a regression: copy it into
 # test/fuzz/regressions/<harness>/ with the fix). Summary: build/fuzz/summary.txt.
@@ -11,7 +12,7 @@ seconds="${1:-600}"
 shift || true
 harnesses=("$@")
 [ ${#harnesses[@]} -eq 0 ] && harnesses=(geometry pipeline config readers)
-[[ "$seconds" =~ ^[0-9]+$ ]] || { echo "fuzz.sh: SECONDS must be a whole number, not '$seconds'" >&2; exit 2; }
+[[ "$seconds" =~ ^[0-9]+$ || "$seconds" = build ]] || { echo "fuzz.sh: SECONDS must be a whole number, not '$seconds'" >&2; exit 2; }
 command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found (Debian: apt install clang)" >&2; exit 2; }
 
 B=build/fuzz
@@ -24,6 +25,7 @@ fi
 cmake --build "$B" -j"$(nproc)" --target fuzzers -- --no-print-directory 2>&1 \
   | grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' || true
 test "${PIPESTATUS[0]}" -eq 0
+[ "$seconds" = build ] && exit 0
 
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:symbolize=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"

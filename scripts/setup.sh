@@ -21,7 +21,7 @@ PKGS=(
   libopencv-dev libeigen3-dev libvisp-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev librostest-dev python3-rostest
   rviz xvfb xauth imagemagick image-transport-tools python3-matplotlib python3-opencv
-  chromium
+  chromium clang
 )
 
 missing=()
@@ -50,3 +50,6 @@ echo "[setup] building"
 cmake --build build -j"$(nproc)" --target all tests -- --no-print-directory 2>&1 \
   | grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' || true
 test "${PIPESTATUS[0]}" -eq 0
+# The fuzz harnesses (clang, ASan + UBSan): the suite replays their corpus (ctest fuzz_replay).
+echo "[setup] building the fuzz harnesses (build/fuzz)"
+bash scripts/fuzz.sh build

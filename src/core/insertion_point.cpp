@@ -133,6 +133,11 @@ InsertionPointEstimate intersectAxes(std::vector<PluckerLine> const& axes, std::
   e.position = Im.head<3>() / Im(3);
   e.status = InsertionPointStatus::kOk;
   finishEstimate(axes, w, &e);
+  // Axes beyond double range (moments ~1e300): no usable point, flagged rather than returned.
+  if (!AtA.allFinite() || !e.position.allFinite() || !e.covariance.allFinite()) {
+    e.status = InsertionPointStatus::kAtInfinity;
+    e.position.setZero(), e.covariance.setZero();
+  }
   return e;
 }
 

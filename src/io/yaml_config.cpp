@@ -216,7 +216,7 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   need(p.radius > 0.0 && p.radius < 0.05, "radius", "in (0, 0.05) m");
   need(S.learned.threads >= 1 && S.learned.threads <= 64, "segmentation/learned_threads", "in [1, 64]");
   need(S.processing_width >= 32, "segmentation/processing_width", ">= 32 px");
-  need(S.sigma_radius >= 0 && S.sigma_radius <= 8, "segmentation/sigma_radius", "in [0, 8]");
+  need(S.sigma_radius >= 1 && S.sigma_radius <= 3, "segmentation/sigma_radius", "in [1, 3] (the Sigma filter's windows)");
   need(S.sigma_delta >= 0 && S.sigma_delta <= 255, "segmentation/sigma_delta", "in [0, 255]");
   need(S.fov_refresh >= 1, "segmentation/fov_refresh", ">= 1");
   need(S.level_memory_px >= 0, "segmentation/level_memory_px", ">= 0");

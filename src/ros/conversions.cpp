@@ -32,6 +32,15 @@ std::string validateCameraInfo(sensor_msgs::CameraInfo const& info, int width, i
     return "camera_info has a zero or invalid camera matrix K (uncalibrated camera?)";
   if (!finite(info.P) || (info.P[0] != 0.0 && !(info.P[5] > 0.0)) || info.P[0] < 0.0)
     return "camera_info has an invalid projection matrix P";
+  // Pinhole form (sensor_msgs/CameraInfo): K = [fx s cx; 0 fy cy; 0 0 1], P likewise when set,
+  // focal lengths of at most 1e6 px (the inverse is used on every pixel).
+  auto pinhole = [](double fx, double fy, double l0, double l1, double l2, double w) {
+    return fx <= 1e6 && fy <= 1e6 && fx >= 1e-3 && fy >= 1e-3 && l0 == 0.0 && l1 == 0.0 && l2 == 0.0 && w == 1.0;
+  };
+  if (!pinhole(info.K[0], info.K[4], info.K[3], info.K[6], info.K[7], info.K[8]))
+    return "camera_info's K is not a pinhole camera matrix ([fx s cx; 0 fy cy; 0 0 1], focal lengths in [1e-3, 1e6] px)";
+  if (info.P[0] > 0.0 && !pinhole(info.P[0], info.P[5], info.P[4], info.P[8], info.P[9], info.P[10]))
+    return "camera_info's P is not a pinhole projection matrix ([fx' s cx' tx; 0 fy' cy' ty; 0 0 1 0])";
   if (!finite(info.D)) return "camera_info has non-finite distortion coefficients";
   if (hasDistortion(info) && info.distortion_model != "plumb_bob" && info.distortion_model != "rational_polynomial")
     return "camera_info distortion model '" + info.distortion_model + "' is not supported";

@@ -2,7 +2,6 @@
 # Writes the fuzzers' seed corpus (test/fuzz/corpus/<harness>/), deterministically: inputs laid
 # out as the harnesses read them (fuzz_input.h: big-endian u32, a byte before each real).
 # Run once when a harness's input layout changes: /usr/bin/python3 test/fuzz/make_corpus.py
-import io
 import os
 import random
 import struct
@@ -92,17 +91,6 @@ def config_seeds():
         with open(os.path.join(cams, name), "rb") as f:
             write("config", name, f.read())
     write("config", "nested", b"segmentation: {sigma_radius: 2, grow_thresholds: [10, 20, 30]}\ninsertion_points:\n  max_points: 3\n")
-    from sensor_msgs.msg import CameraInfo
-    ci = CameraInfo()
-    ci.width, ci.height = 640, 480
-    ci.distortion_model = "plumb_bob"
-    ci.D = [0.1, -0.05, 0, 0, 0]
-    ci.K = [600, 0, 320, 0, 600, 240, 0, 0, 1]
-    ci.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
-    ci.P = [600, 0, 320, 0, 0, 600, 240, 0, 0, 0, 1, 0]
-    buf = io.BytesIO()
-    ci.serialize(buf)
-    write("config", "camera_info.msg", buf.getvalue())
 
 
 def readers_seeds():

@@ -86,3 +86,27 @@ TEST(Conversions, TheAxisThroughRoundTripsAndIsAbsentUnlessValid) {
 }
 
 }  // namespace
+
+// Found by fuzz_config: a K whose last row is not (0, 0, 1), or a focal length of 1e-300, passed
+// and its inverse was not finite.
+TEST(Conversions, CameraInfoMustBeAPinholeCamera) {
+  sensor_msgs::CameraInfo info;
+  info.width = 640, info.height = 480;
+  info.K = {600, 0, 320, 0, 600, 240, 0, 0, 1};
+  EXPECT_EQ(endo_guidance::ros_io::validateCameraInfo(info), "");
+  info.P = {600, 0, 320, 0, 0, 600, 240, 0, 0, 0, 1, 0};
+  EXPECT_EQ(endo_guidance::ros_io::validateCameraInfo(info), "");
+  auto bad = [](sensor_msgs::CameraInfo i) { return !endo_guidance::ros_io::validateCameraInfo(i).empty(); };
+  sensor_msgs::CameraInfo k = info;
+  k.K[8] = 0.0;
+  EXPECT_TRUE(bad(k));
+  k = info;
+  k.K[6] = 1e-3;
+  EXPECT_TRUE(bad(k));
+  k = info;
+  k.K[0] = 1e-300;
+  EXPECT_TRUE(bad(k));
+  k = info;
+  k.P[10] = 0.0;
+  EXPECT_TRUE(bad(k));
+}
