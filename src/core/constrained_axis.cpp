@@ -86,6 +86,8 @@ std::optional<ConstrainedAxis> constrainAxisToPoint(CylinderPose const& measured
   out.pose.covariance = G * P * G.transpose();
   out.pivot = I;
   out.chi2 = cost;
+  // Covariances beyond double range (found by fuzz_geometry): nothing is guessed.
+  if (!out.pose.covariance.allFinite() || !out.pose.axis.moment().allFinite() || !std::isfinite(out.chi2)) return std::nullopt;
   return out;
 }
 

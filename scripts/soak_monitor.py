@@ -1,0 +1,168 @@
+#!/usr/bin/python3
+"""Soak monitor (scripts/soak.sh runs it): drives the servo between two targets and, every
+minute, samples each node's resident memory, the image -> trocar tf latency (p50, p99) and the
+frames without an instruments message (dropped). Writes soak.jsonl, soak.png and a verdict
+against the targets (memory growth < 1 MB over the last 20 minutes, p99 drift < 10 %, dropped
+< 0.5 %); exit 1 when one is missed."""
+import argparse
+import json
+import os
+import sys
+import threading
+import time
+
+
+def rss_kb(pid):
+    try:
+        with open("/proc/%d/status" % pid) as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def node_pids():
+    import rosgraph
+    import rosnode
+    import xmlrpc.client
+    master = rosgraph.Master("/soak")
+    pids = {}
+    for name in rosnode.get_node_names():
+        if name == "/soak":
+            continue
+        try:
+            code, _, pid = xmlrpc.client.ServerProxy(master.lookupNode(name)).getPid("/soak")
+            if code == 1:
+                pids[name] = pid
+        except Exception:
+            pass
+    return pids
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--warmup", type=float, default=30.0, help="s before the first sample (trocars located)")
+    ap.add_argument("--out", default="build/soak")
+    ap.add_argument("--window", type=float, default=20.0, help="minutes at the end judged for memory growth")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    import rosgraph
+    deadline = time.time() + 30
+    while not rosgraph.is_master_online():
+        if time.time() > deadline:
+            sys.exit("soak_monitor: no ROS master at %s after 30 s" % os.environ.get("ROS_MASTER_URI"))
+        time.sleep(0.5)
+    import rospy
+    from endo_guidance.msg import InstrumentAxisArray, ServoTarget
+    from sensor_msgs.msg import CameraInfo
+    from tf2_msgs.msg import TFMessage
+    rospy.init_node("soak", anonymous=False)
+    lock = threading.Lock()
+    infos, seen, latencies = set(), set(), []
+
+    def on_info(m):
+        with lock:
+            infos.add(m.header.stamp.to_nsec())
+
+    def on_instruments(m):
+        with lock:
+            seen.add(m.header.stamp.to_nsec())
+
+    def on_tf(m):
+        now = rospy.Time.now()
+        with lock:
+            for t in m.transforms:
+                if t.child_frame_id.startswith("trocar_"):
+                    latencies.append((now - t.header.stamp).to_sec() * 1e3)
+                    break
+
+    rospy.Subscriber("/endoscope/camera_info", CameraInfo, on_info, queue_size=200)
+    rospy.Subscriber("/endoscope/instruments", InstrumentAxisArray, on_instruments, queue_size=200)
+    rospy.Subscriber("/tf", TFMessage, on_tf, queue_size=500)
+    target = rospy.Publisher("/visual_servo/target", ServoTarget, queue_size=2, latch=True)
+    tips = [(0.0, 0.01, 0.12), (0.015, 0.025, 0.13)]
+    rospy.sleep(a.warmup)
+    with lock:  # the warm-up is not judged
+        infos.clear(), seen.clear(), latencies.clear()
+    samples = []
+    start = time.time()
+    k = 0
+    jsonl = open(os.path.join(a.out, "soak.jsonl"), "w")
+    while not rospy.is_shutdown() and time.time() - start < a.minutes * 60.0:
+        minute_end = start + (len(samples) + 1) * 60.0
+        while time.time() < minute_end and not rospy.is_shutdown():  # a new target every 5 s
+            t = ServoTarget(mode=0, insertion_point_id=0)
+            t.tip.x, t.tip.y, t.tip.z = tips[k % 2]
+            target.publish(t)
+            k += 1
+            time.sleep(min(5.0, max(0.0, minute_end - time.time())))
+        with lock:
+            lat = sorted(latencies)
+            latencies.clear()
+            # frames of this minute: camera_info stamps older than 1 s (their instruments had time)
+            cut = rospy.Time.now().to_nsec() - 1_000_000_000
+            done = {s for s in infos if s < cut}
+            infos.difference_update(done)
+            dropped = sum(1 for s in done if s not in seen)
+            seen.difference_update({s for s in seen if s < cut})
+        rss = {n: rss_kb(p) for n, p in node_pids().items()}
+        s = {"minute": len(samples) + 1, "frames": len(done), "dropped": dropped,
+             "p50_ms": lat[len(lat) // 2] if lat else None, "p99_ms": lat[int(len(lat) * 0.99)] if lat else None,
+             "rss_kb": {n: v for n, v in rss.items() if v is not None}}
+        samples.append(s)
+        jsonl.write(json.dumps(s) + "\n")
+        jsonl.flush()
+        print("[soak] minute %d: %d frames, %d dropped, tf latency p50 %s ms p99 %s ms, manager %s kB" % (
+            s["minute"], s["frames"], dropped, s["p50_ms"] and round(s["p50_ms"], 2), s["p99_ms"] and round(s["p99_ms"], 2),
+            s["rss_kb"].get("/sim_manager")), flush=True)
+    sys.exit(verdict(samples, a))
+
+
+def verdict(samples, a):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    if len(samples) < 2:
+        print("[soak] fewer than 2 minutes sampled")
+        return 1
+    m = [s["minute"] for s in samples]
+    fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
+    for n in sorted(samples[-1]["rss_kb"]):
+        ax[0].plot(m, [s["rss_kb"].get(n, float("nan")) / 1024 for s in samples], label=n)
+    ax[0].set_ylabel("resident memory (MB)")
+    ax[0].legend(fontsize=7)
+    ax[1].plot(m, [s["p50_ms"] for s in samples], label="p50")
+    ax[1].plot(m, [s["p99_ms"] for s in samples], label="p99")
+    ax[1].set_ylabel("image -> trocar tf (ms)")
+    ax[1].legend()
+    ax[2].plot(m, [100.0 * s["dropped"] / max(1, s["frames"]) for s in samples])
+    ax[2].set_ylabel("dropped frames (%)")
+    ax[2].set_xlabel("minute")
+    fig.tight_layout()
+    fig.savefig(os.path.join(a.out, "soak.png"), dpi=90)
+    # Verdicts: memory over the last `window` minutes, p99 drift (last 5 min vs first 5), drops.
+    last = [s for s in samples if s["minute"] > samples[-1]["minute"] - a.window]
+    growth = {n: (last[-1]["rss_kb"].get(n, 0) - last[0]["rss_kb"].get(n, 0)) / 1024.0 for n in last[-1]["rss_kb"]}
+    p99 = [s["p99_ms"] for s in samples if s["p99_ms"] is not None]
+    head, tail = p99[:5], p99[-5:]
+    drift = (sorted(tail)[len(tail) // 2] / sorted(head)[len(head) // 2] - 1.0) if head and tail else float("nan")
+    frames = sum(s["frames"] for s in samples)
+    dropped = sum(s["dropped"] for s in samples)
+    rate = 100.0 * dropped / max(1, frames)
+    worst = max(growth.items(), key=lambda kv: kv[1]) if growth else ("-", 0.0)
+    ok = worst[1] < 1.0 and abs(drift) < 0.10 and rate < 0.5
+    summary = {"minutes": samples[-1]["minute"], "frames": frames, "dropped": dropped, "dropped_pct": rate,
+               "memory_growth_mb": growth, "p99_first_ms": head, "p99_last_ms": tail, "p99_drift": drift, "ok": ok}
+    with open(os.path.join(a.out, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=1)
+    print("[soak] %d min, %d frames: dropped %.3f %% (< 0.5), p99 drift %+.1f %% (< 10), largest memory growth "
+          "over the last %d min %.2f MB (%s; < 1): %s" % (summary["minutes"], frames, rate, 100 * drift, int(a.window),
+                                                          worst[1], worst[0], "PASS" if ok else "FAIL"))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    main()
