@@ -49,7 +49,12 @@ for h in "${harnesses[@]}"; do
     echo "fuzz.sh: $h: a regression input crashes again (see $log.regressions)" >&2
     status=1
   fi
-  if "$exe" "${common[@]}" -max_total_time="$seconds" "$work" "$seeds" >"$log" 2>&1; then result=ok; else result=CRASH; status=1; fi
+  extra=()
+  if [ "$h" = readers ]; then  # video seeds are written here, not kept in the repository
+    [ -d "$B/seeds/readers" ] || /usr/bin/python3 test/fuzz/make_corpus.py --videos "$B/seeds/readers"
+    extra=("$B/seeds/readers")
+  fi
+  if "$exe" "${common[@]}" -max_total_time="$seconds" "$work" "$seeds" "${extra[@]}" >"$log" 2>&1; then result=ok; else result=CRASH; status=1; fi
   runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo 0)
   cov=$(grep -oE 'cov: [0-9]+' "$log" | tail -1 | grep -oE '[0-9]+' || echo 0)
   line=$(printf '%-9s %s  %6s s  %9s runs  cov %5s  corpus %4s  regressions %d' "$h" "$result" "$seconds" "$runs" "$cov" \

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "endo_guidance/core/apparent_contour.h"
+
 namespace endo_guidance::core {
 
 namespace {
@@ -29,10 +31,7 @@ std::optional<Eigen::Vector3d> resolveTarget(TargetRequest const& t, std::option
   if (!K || !K->allFinite() || !(std::abs(K->determinant()) > 0.0)) return fail("pixel target without a valid camera_info");
   if (!t.pixel.allFinite() || !t.line.allFinite() || !std::isfinite(t.depth)) return fail("target not finite");
   Eigen::Vector2d px = t.pixel;
-  if (t.line.head<2>().norm() > 0.0) {  // onto the desired axis line
-    Eigen::Vector3d const l = t.line / t.line.head<2>().norm();
-    px -= (l.head<2>().dot(px) + l(2)) * l.head<2>();
-  }
+  if (t.line.head<2>().norm() > 0.0) px = footOnLine(t.line / t.line.head<2>().norm(), px);  // onto the desired axis line
   Eigen::Vector3d const ray = (K->inverse() * px.homogeneous()).normalized();
   double const depth = t.depth > 0.0 ? t.depth : (tip - T).norm();
   // |s ray - T| = depth: s^2 - 2 s (ray.T) + |T|^2 - depth^2 = 0; the root nearest the current tip.

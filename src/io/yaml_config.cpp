@@ -106,9 +106,11 @@ char const* toString(core::SegmentationParams::Detector d) {
   return d == core::SegmentationParams::Detector::kLearned ? "learned" : "colour";
 }
 
-std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& p) {
-  // key -> setter. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
-  using Setter = std::function<void(YAML::Node const&)>;
+namespace {
+using Setter = std::function<void(YAML::Node const&)>;
+
+// key -> setter of a field of p. Keys mirror config/pipeline.yaml (flat, grouped by prefix).
+std::map<std::string, Setter> pipelineKeys(PipelineParams& p) {
   auto d = [](double& x) { return Setter([&x](YAML::Node const& n) { x = n.as<double>(); }); };
   auto i = [](int& x) { return Setter([&x](YAML::Node const& n) { x = n.as<int>(); }); };
   auto b = [](bool& x) { return Setter([&x](YAML::Node const& n) { x = n.as<bool>(); }); };
@@ -193,23 +195,14 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
       {"tracking/max_angle_deg", d(p.tracking.max_angle_deg)},
       {"tracking/max_distance_px", d(p.tracking.max_distance_px)},
   };
-  std::vector<std::string> unknown;
-  std::function<void(YAML::Node const&, std::string const&)> walk = [&](YAML::Node const& n, std::string const& prefix) {
-    for (auto const& kv : n) {
-      std::string const key = prefix.empty() ? kv.first.as<std::string>() : prefix + "/" + kv.first.as<std::string>();
-      auto const it = keys.find(key);
-      if (it != keys.end()) it->second(kv.second);
-      else if (kv.second.IsMap()) walk(kv.second, key);
-      else unknown.push_back(key);
-    }
-  };
-  try {
-    walk(root, "");
-  } catch (YAML::Exception const& e) {
-    throw std::runtime_error(std::string("pipeline parameters: wrong value type: ") + e.what());
-  }
-  // Values the stages cannot work with are refused here, with the key, not met as a crash or a
-  // silent misbehaviour later (a zero processing width divides by zero).
+  return keys;
+}
+
+// Values the stages cannot work with are refused here, with the key, not met as a crash or a
+// silent misbehaviour later (a zero processing width divides by zero).
+void validatePipelineParams(PipelineParams const& p) {
+  auto const& S = p.segmentation;
+  auto const& T = p.insertion_points;
   auto need = [](bool ok, char const* key, char const* what) {
     if (!ok) throw std::runtime_error(std::string("pipeline parameters: ") + key + " must be " + what);
   };
@@ -247,6 +240,27 @@ std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelinePar
   for (double f : S.regions.background_fractions)
     if (!(f >= 0.0 && f <= 1.0))
       throw std::runtime_error("pipeline parameters: segmentation/grow_background_fractions must lie in [0, 1]");
+}
+}  // namespace
+
+std::vector<std::string> applyPipelineParams(YAML::Node const& root, PipelineParams& p) {
+  auto const keys = pipelineKeys(p);
+  std::vector<std::string> unknown;
+  std::function<void(YAML::Node const&, std::string const&)> walk = [&](YAML::Node const& n, std::string const& prefix) {
+    for (auto const& kv : n) {
+      std::string const key = prefix.empty() ? kv.first.as<std::string>() : prefix + "/" + kv.first.as<std::string>();
+      auto const it = keys.find(key);
+      if (it != keys.end()) it->second(kv.second);
+      else if (kv.second.IsMap()) walk(kv.second, key);
+      else unknown.push_back(key);
+    }
+  };
+  try {
+    walk(root, "");
+  } catch (YAML::Exception const& e) {
+    throw std::runtime_error(std::string("pipeline parameters: wrong value type: ") + e.what());
+  }
+  validatePipelineParams(p);
   return unknown;
 }
 

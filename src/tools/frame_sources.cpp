@@ -49,7 +49,7 @@ std::string bagStructureError(std::string const& path) {
     }
     return true;
   };
-  // Records within [begin, end) of a buffer (a chunk's data).
+  // The records of a chunk's data, each within it.
   auto records = [&](std::vector<unsigned char> const& b) {
     for (std::size_t i = 0; i < b.size();) {
       if (b.size() - i < 4) return false;

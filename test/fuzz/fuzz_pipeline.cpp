@@ -20,7 +20,7 @@ namespace {
 struct Knob {
   char const* key;
   double lo, hi;
-  bool integer;
+  bool integer;  // printed without decimals; a [0, 1] integer knob is a switch (false / true)
 };
 Knob const kKnobs[] = {{"radius", 0.0005, 0.02, false},
                        {"segmentation/processing_width", 32, 640, true},
@@ -57,10 +57,9 @@ extern "C" int LLVMFuzzerTestOneInput(std::uint8_t const* data, std::size_t size
     auto const slash = key.find('/');
     char buf[64];
     std::snprintf(buf, sizeof buf, n.integer ? "%.0f" : "%.9g", v);
-    std::string const value = key.find("strip_search") != std::string::npos || key.find("crossing") != std::string::npos
-                                  ? (v > 0.5 ? "true" : "false")
-                                  : buf;
-    std::string const line = slash == std::string::npos ? key + ": " + value : key.substr(0, slash) + ": {" + key.substr(slash + 1) + ": " + value + "}";
+    std::string const value = n.integer && n.hi == 1 ? (v > 0.5 ? "true" : "false") : buf;
+    std::string const line =
+        slash == std::string::npos ? key + ": " + value : key.substr(0, slash) + ": {" + key.substr(slash + 1) + ": " + value + "}";
     try {
       endo_guidance::io::parsePipelineYaml(line, params);
     } catch (std::runtime_error const&) {

@@ -2,6 +2,8 @@
 # Writes the fuzzers' seed corpus (test/fuzz/corpus/<harness>/), deterministically: inputs laid
 # out as the harnesses read them (fuzz_input.h: big-endian u32, a byte before each real).
 # Run once when a harness's input layout changes: /usr/bin/python3 test/fuzz/make_corpus.py
+# Video seeds are not kept in the repository: `make_corpus.py --videos DIR` writes them where
+# scripts/fuzz.sh asks (build/fuzz/seeds/readers).
 import os
 import random
 import struct
@@ -93,10 +95,10 @@ def config_seeds():
     write("config", "nested", b"segmentation: {sigma_radius: 2, grow_thresholds: [10, 20, 30]}\ninsertion_points:\n  max_points: 3\n")
 
 
-def readers_seeds():
+def video_seeds(out):
+    """Three frames of the seed picture as AVI (MJPG), MP4 (mp4v) and MKV, each after its kind byte."""
     img = picture(32, 24, [(0, 5, 30, 15, 3, 40)], 9)
-    write("readers", "image.png", bytes([0]) + cv2.imencode(".png", img)[1].tobytes())
-    write("readers", "image.jpg", bytes([1]) + cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 70])[1].tobytes())
+    os.makedirs(out, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         for kind, ext, fourcc in [(2, ".avi", "MJPG"), (3, ".mp4", "mp4v"), (4, ".mkv", "MJPG")]:
             p = os.path.join(tmp, "v" + ext)
@@ -104,8 +106,15 @@ def readers_seeds():
             for k in range(3):
                 vw.write(np.roll(img, k, axis=1))
             vw.release()
-            with open(p, "rb") as f:
-                write("readers", "video" + ext, bytes([kind]) + f.read())
+            with open(p, "rb") as f, open(os.path.join(out, "video" + ext), "wb") as g:
+                g.write(bytes([kind]) + f.read())
+
+
+def readers_seeds():
+    img = picture(32, 24, [(0, 5, 30, 15, 3, 40)], 9)
+    write("readers", "image.png", bytes([0]) + cv2.imencode(".png", img)[1].tobytes())
+    write("readers", "image.jpg", bytes([1]) + cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 70])[1].tobytes())
+    with tempfile.TemporaryDirectory() as tmp:
         import rosbag
         import rospy
         from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -127,6 +136,9 @@ def readers_seeds():
 
 
 if __name__ == "__main__":
+    if len(sys.argv) == 3 and sys.argv[1] == "--videos":
+        video_seeds(sys.argv[2])
+        sys.exit(0)
     pipeline_seeds()
     geometry_seeds()
     config_seeds()

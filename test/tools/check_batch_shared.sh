@@ -9,7 +9,7 @@ HERE="$(cd "$(dirname "$0")/../.." && pwd)"
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
 ENDO_GUIDANCE_BIN="$BIN" /usr/bin/python3 "$HERE/scripts/batch_replay.py" "$DATA" --exclude '*Segmentation*' \
-  --camera "$HERE/config/cameras/endovis15_robotic_assumed.yaml" --report --out "$T/out"
+  --camera "$HERE/config/cameras/assumed_720x576.yaml" --report --out "$T/out"
 /usr/bin/python3 - "$T/out" <<'PY'
 import csv, os, sys
 rows = {r["recording"]: r for r in csv.DictReader(open(sys.argv[1] + "/summary.csv"))}
