@@ -22,9 +22,10 @@ if [ ! -f "$B/CMakeCache.txt" ]; then
     -DCATKIN_ENABLE_TESTING=OFF -DPYTHON_EXECUTABLE=/usr/bin/python3 >"$B/configure.log" 2>&1 \
     || { cat "$B/configure.log"; exit 1; }
 fi
-cmake --build "$B" -j"$(nproc)" --target fuzzers -- --no-print-directory 2>&1 \
-  | grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' || true
-test "${PIPESTATUS[0]}" -eq 0
+built=0  # (the build's own status, not grep's)
+cmake --build "$B" -j"$(nproc)" --target fuzzers -- --no-print-directory >"$B/build.log" 2>&1 || built=$?
+grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' "$B/build.log" || true
+[ "$built" -eq 0 ] || { echo "fuzz.sh: the harnesses did not build ($B/build.log)" >&2; exit "$built"; }
 [ "$seconds" = build ] && exit 0
 
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:symbolize=1"

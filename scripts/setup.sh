@@ -47,9 +47,11 @@ if [ ! -f build/CMakeCache.txt ]; then
     || { cat build/configure.log; exit 1; }
 fi
 echo "[setup] building"
-cmake --build build -j"$(nproc)" --target all tests -- --no-print-directory 2>&1 \
-  | grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' || true
-test "${PIPESTATUS[0]}" -eq 0
+# (the build's own status, not grep's: a failed build fails the set-up)
+status=0
+cmake --build build -j"$(nproc)" --target all tests -- --no-print-directory >build/build.log 2>&1 || status=$?
+grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' build/build.log || true
+[ "$status" -eq 0 ] || { echo "[setup] build failed (build/build.log)" >&2; exit "$status"; }
 # The fuzz harnesses (clang, ASan + UBSan): the suite replays their corpus (ctest fuzz_replay).
 echo "[setup] building the fuzz harnesses (build/fuzz)"
 bash scripts/fuzz.sh build

@@ -12,6 +12,22 @@ import threading
 import time
 
 
+def trend_mb(samples, node):
+    """Memory growth of a node over the samples: the least-squares slope times their span (MB), so
+    that one allocator step at either end of the window does not decide the verdict."""
+    pts = [(s["minute"], s["rss_kb"][node] / 1024.0) for s in samples if node in s["rss_kb"]]
+    if len(pts) < 2:
+        return 0.0
+    n = len(pts)
+    mx = sum(p[0] for p in pts) / n
+    my = sum(p[1] for p in pts) / n
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    if sxx == 0.0:
+        return 0.0
+    slope = sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
+    return slope * (pts[-1][0] - pts[0][0])
+
+
 def rss_kb(pid):
     try:
         with open("/proc/%d/status" % pid) as f:
@@ -145,7 +161,7 @@ def verdict(samples, a):
     fig.savefig(os.path.join(a.out, "soak.png"), dpi=90)
     # Verdicts: memory over the last `window` minutes, p99 drift (last 5 min vs first 5), drops.
     last = [s for s in samples if s["minute"] > samples[-1]["minute"] - a.window]
-    growth = {n: (last[-1]["rss_kb"].get(n, 0) - last[0]["rss_kb"].get(n, 0)) / 1024.0 for n in last[-1]["rss_kb"]}
+    growth = {n: trend_mb(last, n) for n in last[-1]["rss_kb"]}
     p99 = [s["p99_ms"] for s in samples if s["p99_ms"] is not None]
     head, tail = p99[:5], p99[-5:]
     drift = (sorted(tail)[len(tail) // 2] / sorted(head)[len(head) // 2] - 1.0) if head and tail else float("nan")

@@ -126,6 +126,8 @@ CylinderPoseResult estimateCylinderPose(Eigen::Matrix3d const& K, double radius,
   S.topLeftCorner<3, 3>() = cov_l0;
   S.bottomRightCorner<3, 3>() = cov_l1;
   res.pose.covariance = J * S * J.transpose();
+  // Huge line covariances overflow the product: no covariance rather than a non-finite one.
+  if (!res.pose.covariance.allFinite()) res.pose.covariance.setZero();
   return res;
 }
 

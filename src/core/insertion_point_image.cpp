@@ -10,7 +10,8 @@ namespace endo_guidance::core {
 
 Eigen::Vector3d projectPointHomogeneous(Eigen::Matrix3d const& K, Eigen::Vector3d const& X) {
   Eigen::Vector3d x = K * X;
-  double const n = x.norm();
+  if (!x.allFinite()) return Eigen::Vector3d::Zero();  // beyond double range: no image, as for K X = 0
+  double const n = x.stableNorm();                      // (no overflow for huge finite entries)
   if (n > 0.0) x /= n;
   if (x.z() < 0.0) x = -x;
   return x;

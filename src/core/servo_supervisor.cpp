@@ -77,10 +77,12 @@ ServoDecision ServoSupervisor::stop(std::string reason) {
   return d;
 }
 
-ServoDecision ServoSupervisor::watchdog(double steady_now, double ros_now) {
+ServoDecision ServoSupervisor::watchdog(double steady_now, double ros_now, double joints_arrival) {
   if (!enabled_ || !moving_) return {};
-  if (steady_now - last_arrival_ > params_.max_age) return stop(fmt("no camera measurement for %.3f s", steady_now - last_arrival_));
+  if (steady_now - last_arrival_ > maxGap()) return stop(fmt("no camera measurement for %.3f s", steady_now - last_arrival_));
   if (ros_now - command_stamp_ > params_.max_age) return stop(fmt("command's measurement %.3f s old", ros_now - command_stamp_));
+  if (!(steady_now - joints_arrival <= params_.joint_timeout))
+    return stop(fmt("joint states stale (%.3f s without)", steady_now - joints_arrival));
   return {};
 }
 

@@ -10,7 +10,9 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <memory>
@@ -56,6 +58,8 @@ class InsertionPointsNodelet : public nodelet::Nodelet {
   std::unique_ptr<core::InsertionPointSet> set_;
   sensor_msgs::CameraInfoConstPtr info_;
   std::string info_error_ = "no camera_info received yet";
+  std::string pending_warning_;  // reported outside the lock (the diagnostics take it)
+  int first_id_ = 0, stored_next_id_ = 0;  // ~next_id: where a restarted nodelet goes on numbering
   ros::Time last_stamp_;
   std::vector<core::InsertionPointReport> last_reports_;
 };
@@ -66,9 +70,12 @@ void InsertionPointsNodelet::onInit() {
   pnh_.param<std::string>("frame_prefix", frame_prefix_, "trocar_");
   pnh_.param("publish_tf", publish_tf_, true);
   pnh_.param("reset_on_time_jump", reset_on_time_jump_, true);
+  pnh_.param("next_id", first_id_, 0);  // left by a previous run on this master (respawn)
+  first_id_ = std::max(first_id_, 0);
+  stored_next_id_ = first_id_;
   try {
     for (auto const& k : ros_io::loadPipelineParams(
-             pnh_, params_, {"frame_prefix", "publish_tf", "reset_on_time_jump", "expected_rate"}))
+             pnh_, params_, {"frame_prefix", "publish_tf", "reset_on_time_jump", "expected_rate", "next_id"}))
       NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
@@ -119,12 +126,23 @@ void InsertionPointsNodelet::infoCb(sensor_msgs::CameraInfoConstPtr const& info)
   if (!info_error_.empty()) return;
   bool const changed = !info_ || info_->width != info->width || info_->height != info->height || info_->K != info->K ||
                        info_->P != info->P;
+  sensor_msgs::CameraInfoConstPtr const old = info_;
   info_ = info;
-  if (changed) {  // a new camera: what counts as "outside the view" changed, start again
-    if (set_) NODELET_WARN("camera_info changed: insertion points reset");
-    set_ = std::make_unique<core::InsertionPointSet>(
-        core::outOfViewOptions(params_.insertion_points, ros_io::rectifiedK(*info), cv::Size(static_cast<int>(info->width), static_cast<int>(info->height))));
+  if (!changed) return;
+  auto const options = core::outOfViewOptions(params_.insertion_points, ros_io::rectifiedK(*info),
+                                              cv::Size(static_cast<int>(info->width), static_cast<int>(info->height)));
+  std::string const mode = std::to_string(info->width) + "x" + std::to_string(info->height);
+  if (set_ && old && ros_io::sameCameraScale(*old, *info)) {
+    // Another mode of the same camera: the trocars (camera frame) hold; only the view moved.
+    set_->setOptions(options);
+    pending_warning_ = "camera mode changed to " + mode + " (same camera, K scaled): insertion points kept";
+    return;
   }
+  int const next_id = set_ ? set_->nextId() : first_id_;
+  set_ = std::make_unique<core::InsertionPointSet>(options);
+  set_->setNextId(next_id);  // ids are never reused: a servo on an old id must not pivot about a new trocar
+  if (old) pending_warning_ = "camera_info changed (another camera, " + mode + "): insertion points reset, new ids from " +
+                              std::to_string(next_id);
 }
 
 void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
@@ -135,12 +153,14 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     lock.unlock();
     return monitor_->rejected(info_error_.empty() ? "no camera_info received yet" : info_error_);
   }
+  std::vector<std::string> warnings;
+  if (!pending_warning_.empty()) warnings.push_back(std::move(pending_warning_)), pending_warning_.clear();
   if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
-    std::string const why = "time went backwards (" + std::to_string((last_stamp_ - msg->header.stamp).toSec()) + " s, bag loop?)";
+    char b[64];
+    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - msg->header.stamp).toSec());
     if (reset_on_time_jump_) set_->resetAll();
-    lock.unlock();
-    monitor_->rejected(why + (reset_on_time_jump_ ? ": insertion points reset" : ""));
-    lock.lock();
+    warnings.push_back(std::string("time went backwards (") + b + " s, bag loop?)" +
+                       (reset_on_time_jump_ ? ": insertion points reset, new ids from " + std::to_string(set_->nextId()) : ""));
   }
   last_stamp_ = msg->header.stamp;
   Eigen::Matrix3d const K = ros_io::rectifiedK(*info_);
@@ -207,7 +227,12 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     t.transform.rotation.w = 1.0;  // axes parallel to the optical frame
     tfs.push_back(t);
   }
+  int const next_id = set_->nextId();
+  bool const store_id = next_id != stored_next_id_;
+  stored_next_id_ = next_id;
   lock.unlock();
+  if (store_id) pnh_.setParam("next_id", next_id);  // only when a point is discovered
+  for (auto const& w : warnings) monitor_->warn(w);
   if (publish_tf_ && !tfs.empty()) tf_->sendTransform(tfs);
   points_pub_.publish(points);
   instruments_pub_.publish(instruments);

@@ -2,12 +2,15 @@
 // endo_guidance/MotionScript: a scripted "surgeon" for the simulation: smooth sinusoidal
 // InstrumentVelocity commands (pan, tilt, insertion, roll) to each arm, so that the shafts sweep
 // about their trocars as in surgery (the vision pipeline needs that angular spread); with
-// `duration` > 0 it stops after that many seconds (then another commander, e.g. the servo, takes over).
+// `duration` > 0 it stops after that many seconds (then another commander, e.g. the servo, takes over);
+// ~restart (std_srvs/Trigger) plays it again from the start (e.g. to re-locate the trocars).
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
+#include <std_srvs/Trigger.h>
 
 #include <cmath>
+#include <mutex>
 
 #include "endo_guidance/InstrumentVelocity.h"
 
@@ -31,11 +34,22 @@ class MotionScriptNodelet : public nodelet::Nodelet {
     }
     for (auto const& a : arms_) pubs_.push_back(nh.advertise<InstrumentVelocity>(a + "/command", 5));
     start_ = ros::WallTime::now();
+    restart_srv_ = pnh.advertiseService("restart", &MotionScriptNodelet::restart, this);
     timer_ = nh.createWallTimer(ros::WallDuration(1.0 / rate), [this](ros::WallTimerEvent const&) { tick(); });
   }
 
  private:
+  bool restart(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    start_ = ros::WallTime::now();
+    finished_ = false;
+    res.success = true;
+    res.message = "motion script restarted";
+    NODELET_INFO("MotionScript: restarted");
+    return true;
+  }
   void tick() {
+    std::lock_guard<std::mutex> lock(mutex_);
     double const t = (ros::WallTime::now() - start_).toSec();
     if (duration_ > 0.0 && t > duration_) {  // done: hand the arms over (one zero command, then silence)
       if (!finished_) {
@@ -73,6 +87,8 @@ class MotionScriptNodelet : public nodelet::Nodelet {
   bool finished_ = false;
   std::vector<ros::Publisher> pubs_;
   ros::WallTimer timer_;
+  ros::ServiceServer restart_srv_;
+  std::mutex mutex_;  // guards start_ and finished_ (timer and service callbacks)
   ros::WallTime start_;
 };
 

@@ -10,6 +10,7 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include <chrono>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 
@@ -22,6 +23,7 @@
 #include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
+#include "endo_guidance/ros/transport_errors.h"
 
 namespace endo_guidance {
 
@@ -57,6 +59,7 @@ class SegmentationNodelet : public nodelet::Nodelet {
   std::vector<Eigen::Vector3d> trocar_images_;
   std::vector<int> trocar_ids_;
   ros::Time last_stamp_;
+  cv::Size last_size_;
   sensor_msgs::CameraInfo rectified_for_;  // the camera model rectify_ was built for
   std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectify_;
   // For the diagnostics: the last frame's shafts, and the strip searches (the costliest step)
@@ -141,6 +144,12 @@ void SegmentationNodelet::onInit() {
       last_frame_ = ros::WallTime::now();
       return;
     }
+    // Frames the image transport could not decode never reach imageCb: report them here.
+    // (the transport's topic: <image>/<transport>, which getTopic() may or may not include)
+    std::string const topic = camera_sub_.getTopic(), transport = camera_sub_.getTransport();
+    for (std::string const& t : {topic, topic + "/" + transport})
+      if (auto const [lost, why] = ros_io::TransportErrors::instance().take(t); lost > 0)
+        monitor_->rejected(std::to_string(lost) + " frame(s) not decoded by the '" + transport + "' transport: " + why);
     if ((ros::WallTime::now() - last_frame_).toSec() > 3.0)
       monitor_->rejected("no image + camera_info pair for 3 s on '" + camera_sub_.getTopic() + "' and '" + camera_sub_.getInfoTopic() +
                          "': is camera_info published, with the images' stamps?");
@@ -219,15 +228,33 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
   }
   auto const t0 = std::chrono::steady_clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
+  auto const reset = [this] {
+    segmenter_.setParams(params_.segmentation);  // clears the per-seed memory
+    tracker_.reset();
+  };
   if (!last_stamp_.isZero() && image->header.stamp < last_stamp_) {
-    monitor_->rejected("time went backwards (" + std::to_string((last_stamp_ - image->header.stamp).toSec()) +
-                       " s, bag loop?): state reset");
-    if (reset_on_time_jump_) {
-      segmenter_.setParams(params_.segmentation);  // clears the per-seed memory
-      tracker_.reset();
-    }
+    char b[64];
+    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - image->header.stamp).toSec());
+    monitor_->warn(std::string("time went backwards (") + b + " s, bag loop?)" + (reset_on_time_jump_ ? ": state reset" : ""));
+    if (reset_on_time_jump_) reset();
   }
   last_stamp_ = image->header.stamp;
+  // A new camera mode: what was tracked, and the trocars' images, are in the old pixels.
+  if (cv::Size const size(static_cast<int>(image->width), static_cast<int>(image->height)); size != last_size_) {
+    if (!last_size_.empty()) {
+      monitor_->warn("image size changed " + std::to_string(last_size_.width) + "x" + std::to_string(last_size_.height) +
+                     " -> " + std::to_string(size.width) + "x" + std::to_string(size.height) + ": state reset");
+      reset();
+      // The trocars' images in the new pixels until InsertionPoints sends them: u' + w/2 = s (u + w/2).
+      double const sx = static_cast<double>(size.width) / last_size_.width, sy = static_cast<double>(size.height) / last_size_.height;
+      for (Eigen::Vector3d& x : trocar_images_) {
+        x.x() = sx * (x.x() + 0.5 * x.z()) - 0.5 * x.z();
+        x.y() = sy * (x.y() + 0.5 * x.z()) - 0.5 * x.z();
+        x.normalize();
+      }
+    }
+    last_size_ = size;
+  }
   core::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
   {
     std::lock_guard<std::mutex> lock(diag_mutex_);

@@ -4,10 +4,12 @@
 //   camera side: <camera>/instruments (axes attached to estimated trocars), tf
 //     <optical frame> -> trocar_<id> (the estimated trocar), camera_info (for pixel targets);
 //   robot side: joint_states, tf robot_base -> <robot trocar frame>, -> <robot instrument frame>;
-//   out: <arm>/command (InstrumentVelocity in the robot trocar frame), ~state (ServoState).
+//   out: <arm>/command (InstrumentVelocity in the robot trocar frame), ~state (ServoState),
+//     /diagnostics (why it is stopped: at once on a change, else at 1 Hz by the steady clock).
 // Safety: every decision is core ServoSupervisor's (tested as properties): zero command within the
 // frame that reveals lost, jumping, stale or missing data; a timer stops it when frames stop
 // coming; the driver's watchdog stays the last line.
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -45,12 +47,14 @@ class VisualServoNodelet : public nodelet::Nodelet {
   void watchdog(ros::SteadyTimerEvent const&);
   /// Carries out the supervisor's decision: the command, the state and why it stopped.
   void apply(core::ServoDecision const& d, std_msgs::Header const& header);
+  void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);
 
   ros::NodeHandle nh_, pnh_;
   ros::Subscriber instruments_sub_, target_sub_, joints_sub_, info_sub_;
   ros::Publisher command_pub_, state_pub_;
   ros::ServiceServer enable_srv_;
-  ros::SteadyTimer timer_;
+  ros::SteadyTimer timer_, diag_timer_;
+  std::unique_ptr<diagnostic_updater::Updater> updater_;
   std::unique_ptr<tf2_ros::Buffer> buffer_;
   std::unique_ptr<tf2_ros::TransformListener> listener_;
 
@@ -60,6 +64,16 @@ class VisualServoNodelet : public nodelet::Nodelet {
   bool use_axis_through_ = true;  // the shaft's axis through its trocar when given (InstrumentAxis.axis_through)
   std::optional<core::RcmJoints> joints_;
   double joints_arrival_ = -1e300;
+
+  // The diagnostics' view, copied by apply() (under mutex_): the updater never takes mutex_.
+  struct Status {
+    bool enabled = false, moving = false, target = false, rotation_estimated = false;
+    int instrument = -1;
+    std::string stopped;  // the last stop's reason; empty while commanding
+    std::size_t commands = 0, stops = 0;
+  };
+  std::mutex status_mutex_;
+  Status status_;
   std::optional<Eigen::Matrix3d> K_;  // rectified, from a valid camera_info (pixel targets)
 };
 
@@ -119,6 +133,13 @@ void VisualServoNodelet::onInit() {
   supervisor_.setEstimateRotation(estimate_rotation);
   supervisor_.setEnabled(enabled);
 
+  // Diagnostics before the subscriptions: the first stop is already reported.
+  updater_ = std::make_unique<diagnostic_updater::Updater>(nh_, pnh_, getName());
+  updater_->setHardwareID(arm_);
+  updater_->add("visual_servo", this, &VisualServoNodelet::diagnostics);
+  status_.stopped = "no measurement yet";
+  diag_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0), [this](ros::SteadyTimerEvent const&) { updater_->force_update(); });
+
   buffer_ = std::make_unique<tf2_ros::Buffer>();
   listener_ = std::make_unique<tf2_ros::TransformListener>(*buffer_, nh_);
   command_pub_ = nh_.advertise<InstrumentVelocity>(arm_ + "/command", 5);
@@ -175,6 +196,21 @@ bool VisualServoNodelet::enableSrv(std_srvs::SetBool::Request& req, std_srvs::Se
 }
 
 void VisualServoNodelet::apply(core::ServoDecision const& d, std_msgs::Header const& header) {
+  bool changed = false;
+  {
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    Status& s = status_;
+    if (d.send || d.publish_state) {
+      std::string const stopped = d.send && d.reason.empty() ? std::string() : d.reason;
+      changed = stopped != s.stopped;
+      s.stopped = stopped;
+      (d.reason.empty() ? s.commands : s.stops) += d.send;
+    }
+    changed |= s.enabled != supervisor_.enabled() || s.instrument != supervisor_.instrument();
+    s.enabled = supervisor_.enabled(), s.moving = supervisor_.moving(), s.target = supervisor_.hasTarget();
+    s.instrument = supervisor_.instrument(), s.rotation_estimated = supervisor_.rotation().estimated();
+  }
+  if (changed) updater_->force_update();  // a stop is seen at once, not at the next period
   if (d.send) {
     InstrumentVelocity c;
     c.header.stamp = ros::Time::now();
@@ -207,7 +243,26 @@ void VisualServoNodelet::watchdog(ros::SteadyTimerEvent const&) {
   std::lock_guard<std::mutex> lock(mutex_);
   std_msgs::Header h;
   h.stamp = ros::Time::now();
-  apply(supervisor_.watchdog(ros::SteadyTime::now().toSec(), h.stamp.toSec()), h);
+  apply(supervisor_.watchdog(ros::SteadyTime::now().toSec(), h.stamp.toSec(), joints_arrival_), h);
+}
+
+void VisualServoNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+  using diagnostic_msgs::DiagnosticStatus;
+  std::lock_guard<std::mutex> lock(status_mutex_);
+  Status const& s = status_;
+  stat.add("enabled", s.enabled);
+  stat.add("instrument (insertion point id)", s.instrument);
+  stat.add("target set", s.target);
+  stat.add("moving", s.moving);
+  stat.add("commands sent", s.commands);
+  stat.add("stops", s.stops);
+  stat.add("camera -> base rotation estimated", s.rotation_estimated);
+  if (!s.enabled)
+    stat.summary(DiagnosticStatus::OK, "disabled (~enable to engage)");
+  else if (s.stopped.empty())
+    stat.summary(DiagnosticStatus::OK, "commanding");
+  else  // engaged but not commanding: the arm is held still, and why
+    stat.summary(DiagnosticStatus::WARN, "stopped: " + s.stopped);
 }
 
 void VisualServoNodelet::instrumentsCb(InstrumentAxisArray::ConstPtr const& msg) {

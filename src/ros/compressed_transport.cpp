@@ -14,6 +14,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
+
+#include "endo_guidance/ros/transport_errors.h"
+
 namespace endo_guidance {
 
 class CompressedPublisher : public image_transport::SimplePublisherPlugin<sensor_msgs::CompressedImage> {
@@ -63,11 +67,9 @@ class CompressedSubscriber : public image_transport::SimpleSubscriberPlugin<sens
 
  protected:
   void internalCallback(sensor_msgs::CompressedImageConstPtr const& msg, Callback const& user_cb) override {
+    if (std::string const why = undecodable(msg->data); !why.empty()) return lost(why);
     cv::Mat const img = cv::imdecode(cv::Mat(msg->data), cv::IMREAD_UNCHANGED);
-    if (img.empty()) {
-      ROS_ERROR_THROTTLE(2.0, "compressed transport: cannot decode a '%s' image on %s", msg->format.c_str(), getTopic().c_str());
-      return;
-    }
+    if (img.empty()) return lost("cannot decode a '" + msg->format + "' image");
     namespace enc = sensor_msgs::image_encodings;
     cv_bridge::CvImage out;
     out.header = msg->header;
@@ -83,6 +85,22 @@ class CompressedSubscriber : public image_transport::SimpleSubscriberPlugin<sens
       out.image = img;
     }
     user_cb(out.toImageMsg());
+  }
+
+ private:
+  /// libjpeg decodes a truncated JPEG as a grey-filled image: refuse one without its end-of-image
+  /// marker (FF D9, followed by at most a few bytes of padding).
+  static std::string undecodable(std::vector<uint8_t> const& d) {
+    if (d.size() < 4) return "empty or truncated image data";
+    if (d[0] != 0xFF || d[1] != 0xD8) return {};  // not a JPEG: imdecode judges
+    std::size_t const tail = std::min<std::size_t>(d.size() - 2, 16);
+    for (std::size_t k = 0; k <= tail; ++k)
+      if (d[d.size() - 2 - k] == 0xFF && d[d.size() - 1 - k] == 0xD9) return {};
+    return "truncated JPEG (no end-of-image marker)";
+  }
+  void lost(std::string const& why) const {
+    ROS_ERROR_THROTTLE(2.0, "compressed transport: %s on %s: frame skipped", why.c_str(), getTopic().c_str());
+    ros_io::TransportErrors::instance().report(getTopic(), why);
   }
 };
 

@@ -63,6 +63,22 @@ bool hasDistortion(sensor_msgs::CameraInfo const& info) {
   return std::any_of(info.D.begin(), info.D.end(), [](double d) { return d != 0.0; });
 }
 
+bool sameCameraScale(sensor_msgs::CameraInfo const& a, sensor_msgs::CameraInfo const& b, double tolerance) {
+  if (a.width == 0 || a.height == 0 || b.width == 0 || b.height == 0) return false;
+  if (a.distortion_model != b.distortion_model || a.D != b.D || a.R != b.R || a.header.frame_id != b.header.frame_id) return false;
+  double const sx = static_cast<double>(b.width) / a.width, sy = static_cast<double>(b.height) / a.height;
+  // One 3x3 block (row stride `stride`): focal lengths relative, principal point within tolerance x size.
+  auto same = [&](double const* ka, double const* kb, int stride) {
+    double const fx = ka[0] * sx, fy = ka[stride + 1] * sy;
+    double const cx = (ka[2] + 0.5) * sx - 0.5, cy = (ka[stride + 2] + 0.5) * sy - 0.5;
+    return std::abs(kb[0] - fx) <= tolerance * std::abs(fx) && std::abs(kb[stride + 1] - fy) <= tolerance * std::abs(fy) &&
+           std::abs(kb[2] - cx) <= tolerance * b.width && std::abs(kb[stride + 2] - cy) <= tolerance * b.height &&
+           std::abs(kb[1] - ka[1] * sx) <= tolerance * std::abs(fx);
+  };
+  bool const p_set = a.P[0] != 0.0 || b.P[0] != 0.0;
+  return same(a.K.data(), b.K.data(), 3) && (!p_set || same(a.P.data(), b.P.data(), 4));
+}
+
 std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::CameraInfo const& info) {
   // image_geometry holds the camera model (K, D, R, P with its defaults for unset R and P); the
   // iteration count is ours: OpenCV's default 5 leave 0.02 px at a wide-angle endoscope's corners.

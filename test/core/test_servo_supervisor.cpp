@@ -8,8 +8,9 @@
 //      joint states, robot tf), with an instrument, a trocar, continuous with the previous frame;
 //   P3 between commands the rate changes by at most max_acceleration times the time held (a
 //      stop is always allowed), except for braking ahead of a workspace bound;
-//   P4 at no instant is a non-zero command held longer than max_age after its data (arrival and
-//      stamp), to within one watchdog tick.
+//   P4 at no instant is a non-zero command held longer than its data allow, to within one
+//      watchdog tick: two control periods after the measurement arrived (maxGap), max_age after
+//      its stamp, joint_timeout after the last joint states.
 // The same checker run on the bare control law (no supervisor) must find violations: the
 // properties can fail.
 #include <gtest/gtest.h>
@@ -33,7 +34,7 @@ struct Policy {
   std::function<void(int)> instrument;
   std::function<void(TargetRequest const&, double)> target;
   std::function<ServoDecision(ServoFrame const&, RobotSample const&, double, double)> step;
-  std::function<ServoDecision(double, double)> watchdog;
+  std::function<ServoDecision(double, double, double)> watchdog;
 };
 
 Policy supervised(ServoSupervisor& s) {
@@ -42,7 +43,7 @@ Policy supervised(ServoSupervisor& s) {
   return {[&s](bool on) { return s.setEnabled(on); }, [&s](int id) { s.setInstrument(id); },
           [&s](TargetRequest const& t, double roll) { s.setTarget(t, roll); },
           [&s, K](ServoFrame const& f, RobotSample const& r, double t, double ros) { return s.step(f, r, t, ros, K); },
-          [&s](double t, double ros) { return s.watchdog(t, ros); }};
+          [&s](double t, double ros, double joints) { return s.watchdog(t, ros, joints); }};
 }
 
 // The control law and the workspace limit only, trusting every input (what the supervisor adds
@@ -71,7 +72,7 @@ Policy bare(Bare& b) {
             b.last = d.command;
             return d;
           },
-          [](double, double) { return ServoDecision{}; }};
+          [](double, double, double) { return ServoDecision{}; }};
 }
 
 struct Outcome {
@@ -82,6 +83,7 @@ struct Outcome {
 
 // One seeded sequence of `frames` frames in closed loop.
 void runSequence(Policy const& policy, SupervisorParams const& P, std::uint64_t seed, int frames, Outcome& out) {
+  double const max_gap = ServoSupervisor(P).maxGap();
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   auto chance = [&](double p) { return U(rng) < p; };
@@ -136,12 +138,13 @@ void runSequence(Policy const& policy, SupervisorParams const& P, std::uint64_t 
       } else {
         joints_arrival = t;  // the driver's joint states, 100 Hz
       }
-      ServoDecision const d = policy.watchdog(t, t + ros_offset);
+      ServoDecision const d = policy.watchdog(t, t + ros_offset, joints_arrival);
       if (d.send) held = d.command, last_cmd_time = t;
       if (!held.isZero()) {
         ++out.moving;
-        if (t - held_arrival > P.max_age + kTick + 1e-9) violate("P4 command outlives its data (arrival)");
+        if (t - held_arrival > max_gap + kTick + 1e-9) violate("P4 command outlives its data (arrival)");
         if (t + ros_offset - held_stamp > P.max_age + kTick + 1e-9) violate("P4 command outlives its data (stamp)");
+        if (t - joints_arrival > P.joint_timeout + kTick + 1e-9) violate("P4 command outlives its data (joints)");
       }
     }
   };
@@ -270,6 +273,8 @@ TEST(ServoSupervisor, TheBareLawViolatesTheProperties) {
   EXPECT_GT(out.violations["P2 command across a tip jump"], 0);
   EXPECT_GT(out.violations["P3 beyond max_acceleration"], 0);  // its fixed period at 60 Hz frames
   EXPECT_GT(out.violations["P4 command outlives its data (arrival)"], 0);
+  EXPECT_GT(out.violations["P4 command outlives its data (stamp)"], 0);
+  EXPECT_GT(out.violations["P4 command outlives its data (joints)"], 0);
 }
 
 TEST(ServoSupervisor, ResolvesPixelTargetsOnTheRayAtTheDepth) {

@@ -110,3 +110,40 @@ TEST(Conversions, CameraInfoMustBeAPinholeCamera) {
   k.P[10] = 0.0;
   EXPECT_TRUE(bad(k));
 }
+
+// A camera mode change (a scaled stream) keeps the trocars; another camera does not.
+TEST(Conversions, AnotherModeOfTheSameCameraIsRecognised) {
+  using endo_guidance::ros_io::sameCameraScale;
+  sensor_msgs::CameraInfo a;
+  a.header.frame_id = "endoscope_optical_frame";
+  a.width = 640, a.height = 480;
+  a.distortion_model = "plumb_bob";
+  a.D = {0.1, -0.02, 0, 0, 0};
+  a.K = {600, 0, 319.5, 0, 600, 239.5, 0, 0, 1};
+  a.P = {600, 0, 319.5, 0, 0, 600, 239.5, 0, 0, 0, 1, 0};
+  sensor_msgs::CameraInfo b = a;  // 800x600: x' + 1/2 = 1.25 (x + 1/2)
+  b.width = 800, b.height = 600;
+  b.K = {750, 0, 399.5, 0, 750, 299.5, 0, 0, 1};
+  b.P = {750, 0, 399.5, 0, 0, 750, 299.5, 0, 0, 0, 1, 0};
+  EXPECT_TRUE(sameCameraScale(a, b));
+  EXPECT_TRUE(sameCameraScale(b, a));
+  EXPECT_TRUE(sameCameraScale(a, a));
+  sensor_msgs::CameraInfo c = b;
+  c.K[0] = c.P[0] = 825, c.K[4] = c.P[5] = 825;  // focal lengths +10 %: another camera
+  EXPECT_FALSE(sameCameraScale(a, c));
+  c = b;
+  c.K[2] = c.P[2] = 420;  // principal point 20 px off
+  EXPECT_FALSE(sameCameraScale(a, c));
+  c = b;
+  c.P[0] = 900;  // K scaled, P not
+  EXPECT_FALSE(sameCameraScale(a, c));
+  c = b;
+  c.D[0] = 0.2;  // other lens
+  EXPECT_FALSE(sameCameraScale(a, c));
+  c = b;
+  c.header.frame_id = "other_optical_frame";
+  EXPECT_FALSE(sameCameraScale(a, c));
+  c = b;
+  c.width = 0;
+  EXPECT_FALSE(sameCameraScale(a, c));
+}

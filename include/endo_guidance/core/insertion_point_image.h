@@ -22,7 +22,8 @@ struct ImagePointEstimate {
   Eigen::Vector2d pixel() const { return point.head<2>() / point.z(); }
 };
 
-/// Homogeneous image point of a 3D point (camera frame): x ~ K X, w >= 0 (w = 0 for Z = 0).
+/// Homogeneous image point of a 3D point (camera frame): x ~ K X, unit norm, w >= 0 (w = 0 for
+/// Z = 0); zero when K X is zero or not finite (no image).
 Eigen::Vector3d projectPointHomogeneous(Eigen::Matrix3d const& K, Eigen::Vector3d const& X);
 
 /// The image of an axis: the line through its projection, Eq. (4) (alias of PluckerLine::project).

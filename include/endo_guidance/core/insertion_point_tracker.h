@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #pragma once
 
+#include <algorithm>
+
 #include <cstddef>
 #include <deque>
 #include <functional>
@@ -203,6 +205,10 @@ class InsertionPointSet {
   /// New options (live tuning) for the set and every tracked point; estimates are kept.
   void setOptions(InsertionPointSetOptions const& options);
   InsertionPointSetOptions const& options() const { return options_; }
+  /// The id the next discovered point gets. Ids are never reused (a reset or a new camera does not
+  /// restart them), so that a servo holding an old id never pivots about another trocar.
+  int nextId() const { return next_id_; }
+  void setNextId(int id) { next_id_ = std::max(next_id_, id); }
 
  private:
   void discover();

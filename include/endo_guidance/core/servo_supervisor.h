@@ -7,13 +7,15 @@
 //   clock, or earlier than the previous one (a clock jump back: the history is dropped);
 //   the joint states arrived longer than joint_timeout ago, or the robot's instrument tf is
 //   stamped older than that; the geometry degenerates or the target is unreachable;
-// and, from watchdog(), when no measurement arrived for max_age (steady clock) or the one the
-// command came from is older than max_age (ROS clock): no command outlives its data.
+// and, from watchdog(), when no measurement arrived for maxGap() (steady clock), the one the
+// command came from is older than max_age (ROS clock), or the joint states stopped arriving for
+// joint_timeout: no command outlives its data.
 // Every command it returns is finite, within max_velocity, acceleration-limited from the previous
 // non-zero command over the time it was held, and never leaves the workspace (limitRates).
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <optional>
 #include <string>
 
@@ -23,7 +25,7 @@
 namespace endo_guidance::core {
 
 struct SupervisorParams {
-  double max_age = 0.1;         ///< s: oldest measurement (stamp age) and longest gap between them
+  double max_age = 0.1;         ///< s: oldest measurement (stamp age); the gap bound is maxGap()
   double max_jump = 0.01;       ///< m: largest tip displacement between consecutive frames
   double joint_timeout = 0.2;   ///< s: oldest joint states (arrival) and robot instrument tf (stamp)
   double period = 0.04;         ///< s: the control period the acceleration limit assumes
@@ -90,8 +92,14 @@ class ServoSupervisor {
   ServoDecision step(ServoFrame const& f, RobotSample const& r, double steady_now, double ros_now,
                      std::optional<Eigen::Matrix3d> const& K = std::nullopt);
   /// Between measurements (call at a fixed rate): stops a moving arm when no measurement arrived
-  /// for max_age or the one its command came from is older than max_age by the ROS clock.
-  ServoDecision watchdog(double steady_now, double ros_now);
+  /// for maxGap(), the one its command came from is older than max_age by the ROS clock, or the
+  /// joint states last arrived (steady clock) longer than joint_timeout ago.
+  ServoDecision watchdog(double steady_now, double ros_now, double joints_arrival);
+  /// s: the longest gap between measurements a command may outlive: two control periods (one
+  /// frame lost), at most max_age.
+  double maxGap() const { return std::min(params_.max_age, 2.0 * params_.period); }
+  /// A target was set and accepted (cleared by a refused one).
+  bool hasTarget() const { return pending_.has_value() || servo_.target().has_value(); }
 
   TrocarServo const& servo() const { return servo_; }
   CameraBaseRotation const& rotation() const { return rotation_; }

@@ -28,6 +28,10 @@ std::string validateCameraInfo(sensor_msgs::CameraInfo const& info, int width = 
 Eigen::Matrix3d rectifiedK(sensor_msgs::CameraInfo const& info);
 /// True when D has a non-zero coefficient (the edge points must be rectified).
 bool hasDistortion(sensor_msgs::CameraInfo const& info);
+/// True when b is the camera of a in another mode (a scaled or binned stream): K and P scaled by
+/// the ratio of the image sizes, principal points with the pixel centres (x' + 1/2 = s (x + 1/2)),
+/// the same distortion, rectification and frame. 3-D estimates in its optical frame still hold.
+bool sameCameraScale(sensor_msgs::CameraInfo const& a, sensor_msgs::CameraInfo const& b, double tolerance = 0.01);
 /// Distorted pixel -> pixel of the rectified camera (R, P of the camera_info), iterated to 1e-10
 /// px (OpenCV's default 5 iterations leave 0.02 px at the corners of a wide-angle endoscope);
 /// tabulated at every pixel when built (build it once per camera model), interpolated per point.

@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // What every node reports on /diagnostics: frames processed and rejected (with the last
-// reason), input rate, processing time and input-to-output latency, plus node-specific values.
+// reason), input rate, processing time and input-to-output latency, a stalled input, events that
+// reset the node's state, plus node-specific values. Published at 1 Hz by the steady clock, so
+// that it goes on when simulated time stops or jumps back (a paused or looped bag).
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -23,6 +25,11 @@ class FrameMonitor {
   void processed(double processing_ms, ros::Time const& stamp);
   /// A frame (or message) was rejected: logged (throttled) and counted; the node keeps running.
   void rejected(std::string const& reason);
+  /// An event the node recovered from by itself (state reset on a clock jump or a new camera
+  /// mode): logged and reported as a WARN for one period.
+  void warn(std::string const& reason);
+  /// Publish now (after an event a supervisor should see without waiting for the period).
+  void forceUpdate() { updater_.force_update(); }
   /// Extra key/values and a warning level set by the node (e.g. trocar conditioning).
   void setExtra(std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)> f) { extra_ = std::move(f); }
   std::size_t rejectedCount() const;
@@ -30,14 +37,14 @@ class FrameMonitor {
  private:
   void produce(diagnostic_updater::DiagnosticStatusWrapper& stat);
   diagnostic_updater::Updater updater_;
-  ros::Timer timer_;
+  ros::SteadyTimer timer_;
   std::string name_;
   double expected_hz_;
   mutable std::mutex mutex_;
   std::deque<ros::WallTime> arrivals_;
-  std::size_t frames_ = 0, rejected_ = 0, rejected_since_ = 0, processed_since_ = 0;
+  std::size_t frames_ = 0, rejected_ = 0, rejected_since_ = 0, processed_since_ = 0, warned_since_ = 0;
   double proc_ms_ = 0.0, latency_ms_ = 0.0;
-  std::string last_error_;
+  std::string last_error_, last_warning_;
   ros::WallTime last_error_time_;
   std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)> extra_;
 };
