@@ -104,11 +104,17 @@ class Relay {
     std::lock_guard<std::mutex> l(m_);
     last_image_ = im;
     if (mode_ != Images::kPass || im->header.stamp <= last_stamp_) return;  // (after a burst: never back in time)
-    last_stamp_ = im->header.stamp;
-    auto const out = transform(*im);
-    if (last_info_) {  // camera_info first: the pipeline pairs them by stamp
+    send(*im, im->header.stamp);
+  }
+  // Sends one frame with the given stamp, camera_info first (the pipeline pairs them by stamp).
+  // Called with m_ held.
+  void send(sensor_msgs::Image const& image, ros::Time const& stamp) {
+    last_stamp_ = stamp;
+    auto out = transform(image);
+    out->header.stamp = stamp;
+    if (last_info_) {
       auto info = transform(*last_info_);
-      info.header = im->header;
+      info.header = out->header;
       info_pub_.publish(info);
     }
     image_pub_.publish(out);
@@ -128,17 +134,7 @@ class Relay {
       {
         std::lock_guard<std::mutex> l(m_);
         if (mode_ != Images::kBurst) return;
-        if (last_image_ && last_info_) {
-          auto im = transform(*last_image_);
-          im->header.stamp = ros::Time::now();
-          last_stamp_ = im->header.stamp;
-          auto info = transform(*last_info_);
-          info.header = im->header;
-          info_pub_.publish(info);
-          image_pub_.publish(im);
-          last_sent_ = wall();
-          ++sent_;
-        }
+        if (last_image_ && last_info_) send(*last_image_, ros::Time::now());
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(4));  // 250 Hz
     }
