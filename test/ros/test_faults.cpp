@@ -331,19 +331,23 @@ class Faults : public ::testing::Test {
       flip_ = !flip_;
       Eigen::Vector3d const d2 = Eigen::AngleAxisd(flip_ ? 0.05 : -0.05, aside) * dir;
       Eigen::Vector3d const P = T + (depth + jaw + (depth < 0.14 ? 0.015 : -0.015)) * d2;
-      ServoTarget t;
-      t.header.stamp = ros::Time::now();
-      t.header.frame_id = kCamera;
-      t.mode = ServoTarget::TIP_3D;
-      t.insertion_point_id = id;
-      t.tip.x = P.x(), t.tip.y = P.y(), t.tip.z = P.z();
       double const t0 = wall();
-      target_pub_.publish(t);
+      publishTipTarget(id, P);
       for (double const end = t0 + 2.0; wall() < end; ros::WallDuration(0.02).sleep())
         if (watch_->firstCommand(t0, id) > 0.0 && watch_->commandsBetween(t0, wall()) >= 5) return true;
       std::printf("[ faults ] the servo did not move to its target (attempt %d): %s\n", attempt + 1, watch_->lastReason().c_str());
     }
     return false;
+  }
+  /// A TIP_3D target for the instrument through trocar id, P in the camera frame.
+  void publishTipTarget(int id, Eigen::Vector3d const& P) {
+    ServoTarget t;
+    t.header.stamp = ros::Time::now();
+    t.header.frame_id = kCamera;
+    t.mode = ServoTarget::TIP_3D;
+    t.insertion_point_id = id;
+    t.tip.x = P.x(), t.tip.y = P.y(), t.tip.z = P.z();
+    target_pub_.publish(t);
   }
   /// arm_0's (pan, tilt, depth) now.
   Eigen::Vector3d arm0Joints() {
@@ -380,13 +384,7 @@ class Faults : public ::testing::Test {
     Eigen::Vector3d const dir = (Eigen::AngleAxisd(q(0), Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(q(1), Eigen::Vector3d::UnitX())) *
                                 Eigen::Vector3d::UnitZ();
     Eigen::Vector3d const P = cT * ((q(2) + jaw) * dir);
-    ServoTarget t;
-    t.header.stamp = ros::Time::now();
-    t.header.frame_id = kCamera;
-    t.mode = ServoTarget::TIP_3D;
-    t.insertion_point_id = id;
-    t.tip.x = P.x(), t.tip.y = P.y(), t.tip.z = P.z();
-    target_pub_.publish(t);
+    publishTipTarget(id, P);
     for (double const end = wall() + timeout; wall() < end; ros::WallDuration(0.1).sleep())
       if ((arm0Joints() - q).norm() < 0.01) return true;
     return false;
