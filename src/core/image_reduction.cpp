@@ -103,6 +103,7 @@ __attribute__((target("avx2"))) void halveAvx2(cv::Mat const& src, cv::Mat& dst)
 
 void reduceImage(cv::Mat const& source, int f, cv::Mat& dst) {
   CV_Assert(source.type() == CV_8UC3 && f >= 1 && f <= 255);  // (16-bit row sums)
+  CV_Assert(f <= source.rows && f <= source.cols);            // (an empty result otherwise)
   cv::Mat const src = source;  // (a reference to the data, kept should dst be the same Mat: in place)
   if (f == 1) dst = src;
   // Halving, (a + b + c + d + 2) >> 2: with AVX2 (chosen at run time), pairs side by side by

@@ -171,7 +171,10 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
 SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars) {
   CV_Assert(bgr.type() == CV_8UC3 && !bgr.empty());
   if (auto t = track(bgr)) return std::move(*t);
-  int const scale = std::max(1, static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)));
+  // The reduction factor for about processing_width columns, never more than the shorter side: a
+  // frame wider than tall (say 1920x1) still reduces to at least one pixel each way.
+  int const scale = std::clamp(static_cast<int>(std::lround(static_cast<double>(bgr.cols) / params_.processing_width)), 1,
+                               std::min(bgr.rows, bgr.cols));
   reduceImage(bgr, scale, small_);  // (image_reduction.h)
   updateFieldOfView();
   return net_ ? detectLearned(bgr, scale) : detectColour(bgr, trocars, scale);

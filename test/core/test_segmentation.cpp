@@ -171,6 +171,17 @@ TEST(Segmentation, RejectsBadInput) {
   EXPECT_TRUE(seg.process(cv::Mat(240, 320, CV_8UC3, cv::Scalar(60, 70, 170))).contours.empty());
 }
 
+// A frame far wider than tall (fuzz_pipeline: 1920x1 reduced six-fold had no row left, and the
+// field of view read an empty channel list) is segmented, finding nothing, and so is 1x1.
+TEST(Segmentation, FramesOfOnePixelEitherWay) {
+  for (cv::Size size : {cv::Size(1920, 1), cv::Size(1, 1080), cv::Size(1, 1), cv::Size(1500, 3)}) {
+    InstrumentSegmenter seg;
+    SegmentationResult r;
+    EXPECT_NO_THROW(r = seg.process(cv::Mat(size, CV_8UC3, cv::Scalar(60, 70, 170)))) << size;
+    EXPECT_TRUE(r.contours.empty()) << size;
+  }
+}
+
 // A tracked shaft whose feature level jumps between two frames (a change of light or of the
 // tissue it mirrors) is searched at every growth level in that same frame, not lost until the
 // next full search. (The strip search is off here: it would find the shaft on its own.)
