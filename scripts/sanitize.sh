@@ -27,7 +27,9 @@ cmake --build "$B" -j"$jobs" --target all tests -- --no-print-directory >"$B/bui
 [ "$built" -eq 0 ] || { grep -m20 -E "error|Error" "$B/build.log" >&2; echo "sanitize.sh: build failed ($B/build.log)" >&2; exit 1; }
 reports="$PWD/$B/reports"
 rm -rf "$reports"; mkdir -p "$reports"
-export LD_PRELOAD="$libasan"
+# libstdc++ after libasan: ASan's __cxa_throw interceptor finds the real one at start-up, and a
+# C program (python) that loads C++ later would otherwise abort on its first exception.
+export LD_PRELOAD="$libasan $(g++ -print-file-name=libstdc++.so.6)"
 export ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:abort_on_error=0:log_path=$reports/asan"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan"
 start=$(date +%s)
@@ -36,13 +38,17 @@ status=0
 (cd "$B" && ctest --output-on-failure -j"$jobs" -E '^fuzz_replay$' "$@") >"$B/ctest.log" 2>&1 || status=$?
 unset LD_PRELOAD
 minutes=$(( ($(date +%s) - start + 59) / 60 ))
-n_reports=$(find "$reports" -type f | wc -l)
+# Reports go to log_path where the runtime honours it, else to the test's output (rostest nodes,
+# UBSan beside ASan): both are counted.
+in_log=$(grep -cE 'runtime error:|ERROR: AddressSanitizer|AddressSanitizer: CHECK failed' "$B/ctest.log" || true)
+n_reports=$(( $(find "$reports" -type f | wc -l) + in_log ))
 tests_line="$(grep -E 'tests passed|tests failed' "$B/ctest.log" | tail -1)"
 {
   echo "sanitize: $(git rev-parse --short HEAD) $(date -u +%Y-%m-%dT%H:%MZ), ${minutes} min of tests"
   echo "tests: ${tests_line:-no ctest summary (see $B/ctest.log)}"
   echo "sanitizer reports: $n_reports"
   for f in "$reports"/*; do [ -f "$f" ] && { echo "--- $f"; grep -m3 -E 'ERROR|runtime error' "$f" || head -3 "$f"; }; done
+  grep -E 'runtime error:|ERROR: AddressSanitizer|AddressSanitizer: CHECK failed' "$B/ctest.log" | sort | uniq -c | head -20
 } >"$B/summary.txt"
 cat "$B/summary.txt"
 [ "$status" -eq 0 ] && [ "$n_reports" -eq 0 ]

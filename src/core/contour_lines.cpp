@@ -213,7 +213,11 @@ void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vect
   std::uint8_t const* const data = bgr.data;
   int const x_last = bgr.cols - 3;  // x0 + 1 + 1 must stay in the row
   cv::v_float32x4 const one = cv::v_setall_f32(1.f);
-  auto corner = [](std::uint8_t const* q) { return cv::v_cvt_f32(cv::v_reinterpret_as_s32(cv::v_load_expand_q(q))); };
+  auto corner = [](std::uint8_t const* q) {
+    alignas(4) std::uint8_t b[4];  // (v_load_expand_q reads an int: q is not 4-byte aligned; one movd all the same)
+    std::memcpy(b, q, 4);
+    return cv::v_cvt_f32(cv::v_reinterpret_as_s32(cv::v_load_expand_q(b)));
+  };
   for (int i = 0; i < count; ++i) {
     double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
     int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);

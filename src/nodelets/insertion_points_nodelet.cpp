@@ -88,7 +88,7 @@ void InsertionPointsNodelet::onInit() {
   tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<InsertionPointsConfig>>(reconfigure_mutex_, pnh_);
-  InsertionPointsConfig c;
+  InsertionPointsConfig c = InsertionPointsConfig::__getDefault__();  // (every field set, groups included)
   c.reject_unattached = params_.reject_unattached;
   c.attach_distance = params_.insertion_points.attach_distance;
   c.min_conditioning = params_.insertion_points.tracker.min_conditioning;

@@ -102,7 +102,7 @@ void SegmentationNodelet::onInit() {
 
   // Live tuning starts from the loaded values, not the .cfg defaults.
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<SegmentationConfig>>(reconfigure_mutex_, pnh_);
-  SegmentationConfig c;
+  SegmentationConfig c = SegmentationConfig::__getDefault__();  // (every field set, groups included)
   auto const& S = params_.segmentation;
   c.sigma_delta = S.sigma_delta;
   c.fov_dark_threshold = S.fov.dark_threshold;
