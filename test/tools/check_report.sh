@@ -15,7 +15,8 @@ trap 'rm -rf "$T"' EXIT
 for f in index.html detections.png trocars.png theta_rho.png run.yaml frames.jsonl; do
   [ -s "$T/report/$f" ] || { echo "report: $f missing"; exit 1; }
 done
-CHROME=(timeout 90 chromium --headless=new --no-sandbox --disable-gpu --hide-scrollbars --user-data-dir="$T/profile")
+# (not under a preloaded sanitizer runtime: chromium has its own allocator; scripts/sanitize.sh)
+CHROME=(env -u LD_PRELOAD timeout 90 chromium --headless=new --no-sandbox --disable-gpu --hide-scrollbars --user-data-dir="$T/profile")
 "${CHROME[@]}" --dump-dom "file://$T/report/index.html" 2>/dev/null > "$T/dom.html"
 loaded=$(grep -o 'data-images-loaded="[0-9]*/[0-9]*"' "$T/dom.html" | grep -o '[0-9]*/[0-9]*' || true)
 [ -n "$loaded" ] || { echo "the page's load script did not run"; exit 1; }
