@@ -9,14 +9,15 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-#include "endo_guidance/core/constrained_axis.h"
-#include "endo_guidance/core/cylinder_pose.h"
-#include "endo_guidance/core/insertion_point.h"
-#include "endo_guidance/core/insertion_point_tracker.h"
-#include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/geometry/constrained_axis.h"
+#include "endo_guidance/geometry/cylinder_pose.h"
+#include "endo_guidance/geometry/insertion_point.h"
+#include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "endo_guidance/sim/synthetic_scene.h"
 #include "ratio_reporter.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::sim;
 
 namespace {
 

@@ -16,16 +16,19 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "endo_guidance/core/colour_feature.h"
-#include "endo_guidance/core/image_reduction.h"
-#include "endo_guidance/core/pipeline.h"
-#include "endo_guidance/core/scene_renderer.h"
-#include "endo_guidance/core/sigma_filter.h"
-#include "endo_guidance/core/strip_search.h"
+#include "endo_guidance/perception/colour_feature.h"
+#include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/pipeline/pipeline.h"
+#include "endo_guidance/sim/scene_renderer.h"
+#include "endo_guidance/perception/sigma_filter.h"
+#include "endo_guidance/perception/strip_search.h"
 #include "hough_baseline.h"
 #include "ratio_reporter.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::sim;
+using namespace endo_guidance::pipeline;
 
 namespace {
 

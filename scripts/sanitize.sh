@@ -34,8 +34,9 @@ export ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:abort_on_error=0:log_path=$r
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan"
 start=$(date +%s)
 status=0
-# fuzz_replay is the clang build's (already ASan + UBSan); the rest run here.
-(cd "$B" && ctest --output-on-failure -j"$jobs" -E '^fuzz_replay$' "$@") >"$B/ctest.log" 2>&1 || status=$?
+# fuzz_replay is the clang build's (already ASan + UBSan); behaviour_digest digests the Release
+# build's floating point (-O3), not this one's; the rest run here.
+(cd "$B" && ctest --output-on-failure -j"$jobs" -E '^(fuzz_replay|behaviour_digest)$' "$@") >"$B/ctest.log" 2>&1 || status=$?
 unset LD_PRELOAD
 minutes=$(( ($(date +%s) - start + 59) / 60 ))
 # Reports go to log_path where the runtime honours it, else to the test's output (rostest nodes,

@@ -96,14 +96,14 @@ void loadPipelineYaml(std::string const& path, PipelineParams& p) {
   throw std::runtime_error("parameters YAML '" + path + "': unknown keys:" + list);
 }
 
-core::SegmentationParams::Detector detectorFromString(std::string const& name) {
-  if (name == "colour") return core::SegmentationParams::Detector::kColour;
-  if (name == "learned") return core::SegmentationParams::Detector::kLearned;
+perception::SegmentationParams::Detector detectorFromString(std::string const& name) {
+  if (name == "colour") return perception::SegmentationParams::Detector::kColour;
+  if (name == "learned") return perception::SegmentationParams::Detector::kLearned;
   throw std::runtime_error("pipeline parameters: segmentation/detector must be 'colour' or 'learned', not '" + name + "'");
 }
 
-char const* toString(core::SegmentationParams::Detector d) {
-  return d == core::SegmentationParams::Detector::kLearned ? "learned" : "colour";
+char const* toString(perception::SegmentationParams::Detector d) {
+  return d == perception::SegmentationParams::Detector::kLearned ? "learned" : "colour";
 }
 
 namespace {

@@ -1,6 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // endo_guidance/CylinderPose: apparent contours + camera_info -> instrument axes (Plücker, with
-// covariance) + rviz markers. A thin adapter over core::estimateCylinderPose().
+// covariance) + rviz markers. A thin adapter over geometry::estimateCylinderPose().
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -13,8 +13,8 @@
 
 #include "endo_guidance/ApparentContourArray.h"
 #include "endo_guidance/InstrumentAxisArray.h"
-#include "endo_guidance/core/cylinder_pose.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/geometry/cylinder_pose.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
 #include "endo_guidance/ros/markers.h"
@@ -33,7 +33,7 @@ class CylinderPoseNodelet : public nodelet::Nodelet {
   ros::Subscriber contours_sub_, info_sub_;
   ros::Publisher axes_pub_, markers_pub_;
   std::unique_ptr<ros_io::FrameMonitor> monitor_;
-  core::PipelineParams params_;
+  pipeline::PipelineParams params_;
   std::mutex mutex_;
   sensor_msgs::CameraInfoConstPtr info_;
   std::string info_error_ = "no camera_info received yet";
@@ -47,7 +47,7 @@ void CylinderPoseNodelet::onInit() {
       NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
-    params_ = core::PipelineParams{};
+    params_ = pipeline::PipelineParams{};
   }
   if (!(params_.radius > 0.0) || !std::isfinite(params_.radius)) {
     NODELET_ERROR_STREAM("radius must be > 0 m (got " << params_.radius << "); using 0.004");
@@ -88,13 +88,13 @@ void CylinderPoseNodelet::contoursCb(ApparentContourArray::ConstPtr const& msg) 
   if (markers) mk->markers.push_back(ros_io::deleteAll(msg->header));
   int rejected = 0;
   for (auto const& cm : msg->contours) {
-    core::ApparentContour const c = ros_io::fromMsg(cm);
-    core::CylinderPoseResult const r = core::estimateCylinderPose(K, params_.radius, c, params_.pose);
+    geometry::ApparentContour const c = ros_io::fromMsg(cm);
+    geometry::CylinderPoseResult const r = geometry::estimateCylinderPose(K, params_.radius, c, params_.pose);
     if (!r.ok()) {  // degenerate geometry (parallel lines, behind the camera, too near/far): flagged, not guessed
       ++rejected;
       continue;
     }
-    auto const tip = core::backProjectOntoAxis(K, r.pose.axis, c.tip_px);
+    auto const tip = geometry::backProjectOntoAxis(K, r.pose.axis, c.tip_px);
     InstrumentAxis a;
     if (!ros_io::toMsg(r.pose, params_.radius, c.residual_px, tip, a)) {
       ++rejected;

@@ -25,8 +25,8 @@
 
 #include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/InstrumentAxisArray.h"
-#include "endo_guidance/core/scene_renderer.h"
-#include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/sim/scene_renderer.h"
+#include "endo_guidance/sim/synthetic_scene.h"
 #include "endo_guidance/ros/conversions.h"
 
 namespace endo_guidance {
@@ -51,7 +51,7 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   sensor_msgs::CameraInfo info_;
   Eigen::Matrix3d K_;
   Eigen::Isometry3d base_to_camera_ = Eigen::Isometry3d::Identity();
-  std::unique_ptr<core::SceneRenderer> renderer_;
+  std::unique_ptr<sim::SceneRenderer> renderer_;
   cv::Mat distortion_map_;
   std::vector<std::string> arms_;
   std::string prefix_, base_frame_, camera_frame_;
@@ -85,7 +85,7 @@ void EndoscopeSimulatorNodelet::onInit() {
   pnh_.param("camera_xyz", xyz, xyz);
   pnh_.param("camera_rpy", rpy, rpy);
   pnh_.param("arms", arms_, std::vector<std::string>{"arm_0"});
-  core::RenderOptions ro;
+  sim::RenderOptions ro;
   pnh_.param("black_shafts", ro.black_shafts, false);
   pnh_.param("circular_fov", ro.circular_fov, false);
   pnh_.param("gauze", ro.gauze, false);
@@ -118,7 +118,7 @@ void EndoscopeSimulatorNodelet::onInit() {
     cv::undistortPoints(grid, ideal, Kc, D, cv::noArray(), Kc, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 1e-6));
     distortion_map_ = cv::Mat(height, width, CV_32FC2, ideal.data()).clone();
   }
-  renderer_ = std::make_unique<core::SceneRenderer>(width, height, ro);
+  renderer_ = std::make_unique<sim::SceneRenderer>(width, height, ro);
   buffer_ = std::make_unique<tf2_ros::Buffer>();
   listener_ = std::make_unique<tf2_ros::TransformListener>(*buffer_, nh_);
   static_tf_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
@@ -156,7 +156,7 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
   double const t = (ros::WallTime::now() - start_).toSec();
   Eigen::Vector3d const breathing =
       breathing_amplitude_ * std::sin(2.0 * M_PI * t / breathing_period_) * breathing_direction_;  // camera frame
-  std::vector<core::SyntheticView> views;
+  std::vector<sim::SyntheticView> views;
   InstrumentAxisArray::Ptr axes(new InstrumentAxisArray);
   InsertionPointArray::Ptr points(new InsertionPointArray);
   axes->header.stamp = points->header.stamp = stamp;
@@ -174,20 +174,20 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
     }
     Eigen::Vector3d const trocar_c = camera_from_base * trocar_b.translation() + breathing;
     Eigen::Vector3d const tip_c = camera_from_base * tip_b.translation() + breathing;
-    core::InsertionPointReport r;
+    pipeline::InsertionPointReport r;
     r.id = static_cast<int>(i);
-    r.estimate.status = core::InsertionPointStatus::kOk;
+    r.estimate.status = geometry::InsertionPointStatus::kOk;
     r.estimate.position = trocar_c;
     r.image_point = K_ * trocar_c;
     r.well_conditioned = true;
     r.located = true;  // the truth
     InsertionPoint p;
     if (ros_io::toMsg(r, p)) points->points.push_back(p);
-    auto const view = core::viewOfInstrument(K_, static_cast<int>(info_.width), static_cast<int>(info_.height), trocar_c, tip_c,
+    auto const view = sim::viewOfInstrument(K_, static_cast<int>(info_.width), static_cast<int>(info_.height), trocar_c, tip_c,
                                              radius_, static_cast<int>(i), jaw_length_);
     if (!view) continue;  // tip out of view
     if (!occluded) views.push_back(*view);
-    core::CylinderPose pose;
+    geometry::CylinderPose pose;
     pose.axis = view->axis;
     pose.distance = view->axis.distanceToOrigin();
     InstrumentAxis a;

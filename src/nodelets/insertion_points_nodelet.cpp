@@ -1,7 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // endo_guidance/InsertionPoints: instrument axes -> insertion points (trocars), the attached
 // instruments, tf <optical frame> -> trocar_<id>, rviz markers; services to reset or freeze an
-// estimate. A thin adapter over core::InsertionPointSet.
+// estimate. A thin adapter over geometry::InsertionPointSet.
 #include <dynamic_reconfigure/server.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -23,7 +23,7 @@
 #include "endo_guidance/InsertionPointsConfig.h"
 #include "endo_guidance/InstrumentAxisArray.h"
 #include "endo_guidance/ResetInsertionPoint.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
 #include "endo_guidance/ros/markers.h"
@@ -52,16 +52,16 @@ class InsertionPointsNodelet : public nodelet::Nodelet {
   boost::recursive_mutex reconfigure_mutex_;
 
   std::mutex mutex_;  // guards everything below
-  core::PipelineParams params_;
+  pipeline::PipelineParams params_;
   std::string frame_prefix_ = "trocar_";
   bool publish_tf_ = true, reset_on_time_jump_ = true;
-  std::unique_ptr<core::InsertionPointSet> set_;
+  std::unique_ptr<geometry::InsertionPointSet> set_;
   sensor_msgs::CameraInfoConstPtr info_;
   std::string info_error_ = "no camera_info received yet";
   std::string pending_warning_;  // reported outside the lock (the diagnostics take it)
   int first_id_ = 0, stored_next_id_ = 0;  // ~next_id: where a restarted nodelet goes on numbering
   ros::Time last_stamp_;
-  std::vector<core::InsertionPointReport> last_reports_;
+  std::vector<pipeline::InsertionPointReport> last_reports_;
 };
 
 void InsertionPointsNodelet::onInit() {
@@ -79,7 +79,7 @@ void InsertionPointsNodelet::onInit() {
       NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
-    params_ = core::PipelineParams{};
+    params_ = pipeline::PipelineParams{};
   }
   double expected_rate = 0.0;
   pnh_.param("expected_rate", expected_rate, 0.0);
@@ -129,7 +129,7 @@ void InsertionPointsNodelet::infoCb(sensor_msgs::CameraInfoConstPtr const& info)
   sensor_msgs::CameraInfoConstPtr const old = info_;
   info_ = info;
   if (!changed) return;
-  auto const options = core::outOfViewOptions(params_.insertion_points, ros_io::rectifiedK(*info),
+  auto const options = pipeline::outOfViewOptions(params_.insertion_points, ros_io::rectifiedK(*info),
                                               cv::Size(static_cast<int>(info->width), static_cast<int>(info->height)));
   std::string const mode = std::to_string(info->width) + "x" + std::to_string(info->height);
   if (set_ && old && ros_io::sameCameraScale(*old, *info)) {
@@ -139,7 +139,7 @@ void InsertionPointsNodelet::infoCb(sensor_msgs::CameraInfoConstPtr const& info)
     return;
   }
   int const next_id = set_ ? set_->nextId() : first_id_;
-  set_ = std::make_unique<core::InsertionPointSet>(options);
+  set_ = std::make_unique<geometry::InsertionPointSet>(options);
   set_->setNextId(next_id);  // ids are never reused: a servo on an old id must not pivot about a new trocar
   if (old) pending_warning_ = "camera_info changed (another camera, " + mode + "): insertion points reset, new ids from " +
                               std::to_string(next_id);
@@ -165,12 +165,12 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
   last_stamp_ = msg->header.stamp;
   Eigen::Matrix3d const K = ros_io::rectifiedK(*info_);
   std::vector<Eigen::Vector3d> images;
-  core::wellConditionedImages(*set_, K, &images);
+  pipeline::wellConditionedImages(*set_, K, &images);
   bool const established = !images.empty();
   InstrumentAxisArray::Ptr instruments(new InstrumentAxisArray);
   instruments->header = msg->header;
   std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
-  std::vector<core::CylinderPose> poses;  // per reported instrument: its measured axis
+  std::vector<geometry::CylinderPose> poses;  // per reported instrument: its measured axis
   // (an unstamped message: the tracker assumes 25 Hz; a zero stamp for every message would span no time)
   double const stamp = msg->header.stamp.isZero() ? std::numeric_limits<double>::quiet_NaN() : msg->header.stamp.toSec();
   for (auto const& a : msg->axes) {
@@ -179,9 +179,9 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
       monitor_->rejected("invalid Pluecker axis (non-unit direction, moment not orthogonal, or non-finite)");
       continue;
     }
-    core::CylinderPose const& pose = *parsed;
+    geometry::CylinderPose const& pose = *parsed;
     bool keep = true;
-    int const id = core::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, stamp);
+    int const id = pipeline::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, stamp);
     if (!keep) continue;
     InstrumentAxis out = a;
     out.insertion_point_id = id;
@@ -194,14 +194,14 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
       attached[id].push_back(a.tip_valid ? Eigen::Vector3d(a.tip.x, a.tip.y, a.tip.z)
                                          : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
   }
-  last_reports_ = core::reportInsertionPoints(*set_, K);
+  last_reports_ = pipeline::reportInsertionPoints(*set_, K);
   bool const markers = markers_pub_.getNumSubscribers() > 0;
   visualization_msgs::MarkerArray::Ptr mk(new visualization_msgs::MarkerArray);
   if (markers) mk->markers.push_back(ros_io::deleteAll(msg->header));
   // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
   for (std::size_t i = 0; i < instruments->axes.size(); ++i) {
     InstrumentAxis& m = instruments->axes[i];
-    auto const f = core::axisThroughInsertionPoint(poses[i], m.insertion_point_id, last_reports_,
+    auto const f = pipeline::axisThroughInsertionPoint(poses[i], m.insertion_point_id, last_reports_,
                                                    params_.insertion_points.tracker.point_motion_sigma);
     if (f && ros_io::setThrough(f->pose, m) && markers)
       ros_io::appendThroughMarker(mk->markers, msg->header, static_cast<int>(i), *f,

@@ -17,7 +17,7 @@
 #include <mutex>
 
 #include "endo_guidance/InstrumentVelocity.h"
-#include "endo_guidance/core/rcm_arm.h"
+#include "endo_guidance/control/rcm_arm.h"
 
 namespace endo_guidance {
 
@@ -47,11 +47,11 @@ class RcmDriverNodelet : public nodelet::Nodelet {
  private:
   struct Arm {
     std::string name;
-    core::RcmKinematics kinematics;
-    boost::shared_ptr<core::ArmHardware> hardware;
-    core::CommandWatchdog watchdog;
-    core::RcmJoints command = core::RcmJoints::Zero();
-    core::RcmJoints q = core::RcmJoints::Zero(), rate = core::RcmJoints::Zero();
+    control::RcmKinematics kinematics;
+    boost::shared_ptr<control::ArmHardware> hardware;
+    control::CommandWatchdog watchdog;
+    control::RcmJoints command = control::RcmJoints::Zero();
+    control::RcmJoints q = control::RcmJoints::Zero(), rate = control::RcmJoints::Zero();
     bool at_limit = false, watchdog_stopped = true, hardware_ok = true;
     std::string last_error;
     ros::Subscriber sub;
@@ -62,10 +62,10 @@ class RcmDriverNodelet : public nodelet::Nodelet {
   std::string frame(std::string const& what, std::size_t i) const { return prefix_ + what + "_" + std::to_string(i); }
 
   ros::NodeHandle nh_, pnh_;
-  std::unique_ptr<pluginlib::ClassLoader<core::ArmHardware>> loader_;
+  std::unique_ptr<pluginlib::ClassLoader<control::ArmHardware>> loader_;
   std::mutex mutex_;
   std::vector<Arm> arms_;
-  core::RcmLimits limits_;
+  control::RcmLimits limits_;
   double rate_hz_ = 100.0;
   std::string base_frame_, prefix_;
   ros::SteadyTimer timer_;
@@ -108,12 +108,12 @@ void RcmDriverNodelet::onInit() {
       a.kinematics.trocar = poseFromXyzRpy(doubles(arms[i]["trocar_xyz"], 3, a.name + ".trocar_xyz"),
                                            doubles(arms[i]["trocar_rpy"], 3, a.name + ".trocar_rpy"));
       auto const q0 = doubles(arms[i]["initial"], 4, a.name + ".initial");
-      if (!loader_) loader_ = std::make_unique<pluginlib::ClassLoader<core::ArmHardware>>("endo_guidance", "endo_guidance::core::ArmHardware");
+      if (!loader_) loader_ = std::make_unique<pluginlib::ClassLoader<control::ArmHardware>>("endo_guidance", "endo_guidance::control::ArmHardware");
       a.hardware = loader_->createInstance(hardware);  // throws pluginlib::PluginlibException if unknown
       std::string error;
-      if (!a.hardware->configure(a.name, core::RcmJoints(q0[0], q0[1], q0[2], q0[3]), limits_, &error))
+      if (!a.hardware->configure(a.name, control::RcmJoints(q0[0], q0[1], q0[2], q0[3]), limits_, &error))
         throw std::runtime_error(a.name + ": hardware '" + hardware + "' refused the configuration: " + error);
-      a.watchdog = core::CommandWatchdog(timeout);
+      a.watchdog = control::CommandWatchdog(timeout);
       arms_.push_back(std::move(a));
     }
   } catch (std::exception const& e) {  // incl. pluginlib::PluginlibException
@@ -138,7 +138,7 @@ void RcmDriverNodelet::onInit() {
 void RcmDriverNodelet::commandCb(std::size_t i, InstrumentVelocity::ConstPtr const& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
   Arm& a = arms_[i];
-  core::RcmJoints const c(msg->pan_rate, msg->tilt_rate, msg->insertion_rate, msg->roll_rate);
+  control::RcmJoints const c(msg->pan_rate, msg->tilt_rate, msg->insertion_rate, msg->roll_rate);
   if (!msg->header.frame_id.empty() && msg->header.frame_id != frame("trocar", i)) {
     a.last_error = "command in frame '" + msg->header.frame_id + "', expected '" + frame("trocar", i) + "': ignored";
     ROS_ERROR_STREAM_THROTTLE(2.0, a.name << ": " << a.last_error);
@@ -166,10 +166,10 @@ void RcmDriverNodelet::step(ros::SteadyTimerEvent const&) {
     Arm& a = arms_[i];
     a.hardware_ok = a.hardware->read(a.q, a.rate);
     a.watchdog_stopped = a.watchdog.expired(now.toSec());
-    core::RcmJoints const cmd = (a.watchdog_stopped || !a.hardware_ok) ? core::RcmJoints::Zero() : a.command;
-    core::RcmJoints const v = core::limitRates(a.q, a.rate, cmd, dt, limits_);
+    control::RcmJoints const cmd = (a.watchdog_stopped || !a.hardware_ok) ? control::RcmJoints::Zero() : a.command;
+    control::RcmJoints const v = control::limitRates(a.q, a.rate, cmd, dt, limits_);
     a.at_limit = (v - cmd).norm() > 1e-9 && !a.watchdog_stopped;
-    if (!a.hardware->write(a.hardware_ok ? v : core::RcmJoints::Zero())) a.hardware_ok = false;
+    if (!a.hardware->write(a.hardware_ok ? v : control::RcmJoints::Zero())) a.hardware_ok = false;
     a.hardware->step(dt);
     a.hardware_ok = a.hardware->read(a.q, a.rate) && a.hardware_ok;
     static char const* const joint[4] = {"pan", "tilt", "insertion", "roll"};
@@ -195,7 +195,7 @@ void RcmDriverNodelet::step(ros::SteadyTimerEvent const&) {
     tt.header = ti.header;
     tt.header.frame_id = frame("instrument", i);
     tt.child_frame_id = frame("instrument", i) + "_tip";
-    tt.transform.translation.z = a.q(core::kDepth);
+    tt.transform.translation.z = a.q(control::kDepth);
     tt.transform.rotation.w = 1.0;
     tfs.push_back(tt);
   }
@@ -226,4 +226,4 @@ void RcmDriverNodelet::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
 }  // namespace endo_guidance
 
 PLUGINLIB_EXPORT_CLASS(endo_guidance::RcmDriverNodelet, nodelet::Nodelet)
-PLUGINLIB_EXPORT_CLASS(endo_guidance::core::SimulatedArm, endo_guidance::core::ArmHardware)
+PLUGINLIB_EXPORT_CLASS(endo_guidance::control::SimulatedArm, endo_guidance::control::ArmHardware)

@@ -1,6 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // endo_guidance/Segmentation: image + camera_info -> apparent contours of the instrument shafts
-// (+ a debug overlay, drawn only when subscribed). A thin adapter over core::InstrumentSegmenter.
+// (+ a debug overlay, drawn only when subscribed). A thin adapter over perception::InstrumentSegmenter.
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
@@ -17,9 +17,9 @@
 #include "endo_guidance/ApparentContourArray.h"
 #include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/SegmentationConfig.h"
-#include "endo_guidance/core/pipeline.h"
-#include "endo_guidance/core/segmentation.h"
-#include "endo_guidance/core/shaft_tracking.h"
+#include "endo_guidance/pipeline/pipeline.h"
+#include "endo_guidance/perception/segmentation.h"
+#include "endo_guidance/geometry/shaft_tracking.h"
 #include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
@@ -53,9 +53,9 @@ class SegmentationNodelet : public nodelet::Nodelet {
   std::mutex connect_mutex_;
   int queue_size_ = 2;
   bool reset_on_time_jump_ = true;
-  core::PipelineParams params_;
-  core::InstrumentSegmenter segmenter_;
-  core::ShaftTracker tracker_;
+  pipeline::PipelineParams params_;
+  perception::InstrumentSegmenter segmenter_;
+  geometry::ShaftTracker tracker_;
   std::vector<Eigen::Vector3d> trocar_images_;
   std::vector<int> trocar_ids_;
   ros::Time last_stamp_;
@@ -79,7 +79,7 @@ void SegmentationNodelet::onInit() {
       NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
-    params_ = core::PipelineParams{};
+    params_ = pipeline::PipelineParams{};
   }
   try {
     segmenter_.setParams(params_.segmentation);  // (loads the learned detector's model)
@@ -255,14 +255,14 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
     }
     last_size_ = size;
   }
-  core::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
+  perception::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
   {
     std::lock_guard<std::mutex> lock(diag_mutex_);
     last_shafts_ = static_cast<int>(seg.contours.size());
     ++diag_frames_;
     diag_strip_searches_ += static_cast<std::size_t>(seg.strip_searches);
   }
-  std::vector<core::ApparentContour> contours = seg.contours;
+  std::vector<geometry::ApparentContour> contours = seg.contours;
   // Lens distortion: refit the lines to the rectified edge points.
   if (ros_io::hasDistortion(*info)) {
     if (!rectify_ || info->D != rectified_for_.D || info->K != rectified_for_.K || info->R != rectified_for_.R ||
@@ -270,9 +270,9 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
       rectify_ = ros_io::rectifier(*info);
       rectified_for_ = *info;
     }
-    std::vector<core::ApparentContour> rectified;
+    std::vector<geometry::ApparentContour> rectified;
     for (std::size_t i = 0; i < contours.size(); ++i)
-      if (auto r = core::rectifyContour(contours[i], seg.edges[i], rectify_, params_.segmentation.contours.min_edge_points,
+      if (auto r = perception::rectifyContour(contours[i], seg.edges[i], rectify_, params_.segmentation.contours.min_edge_points,
                                         params_.segmentation.contours.line_sigma_floor_px))
         rectified.push_back(*r);
     contours.swap(rectified);
@@ -282,7 +282,7 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
   out->header = image->header;
   out->width = image->width;
   out->height = image->height;
-  for (core::ApparentContour& c : contours) {
+  for (geometry::ApparentContour& c : contours) {
     // The seed search attached the region to the image of a trocar (index into trocar_images_).
     c.insertion_point_id = c.insertion_point_id >= 0 && c.insertion_point_id < static_cast<int>(trocar_ids_.size())
                                ? trocar_ids_[static_cast<std::size_t>(c.insertion_point_id)]
@@ -295,7 +295,7 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
                       image->header.stamp);
   if (overlay_pub_.getNumSubscribers() > 0) {
     cv_bridge::CvImage ov(image->header, enc::BGR8, cv->image.clone());
-    core::drawSegmentationOverlay(ov.image, seg, trocar_images_);
+    perception::drawSegmentationOverlay(ov.image, seg, trocar_images_);
     overlay_pub_.publish(ov.toImageMsg());
   }
 }

@@ -28,8 +28,8 @@
 #include "endo_guidance/InstrumentVelocity.h"
 #include "endo_guidance/ServoState.h"
 #include "endo_guidance/ServoTarget.h"
-#include "endo_guidance/core/servo_supervisor.h"
-#include "endo_guidance/core/cylinder_pose.h"
+#include "endo_guidance/control/servo_supervisor.h"
+#include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/ros/conversions.h"
 
 namespace endo_guidance {
@@ -46,7 +46,7 @@ class VisualServoNodelet : public nodelet::Nodelet {
   bool enableSrv(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
   void watchdog(ros::SteadyTimerEvent const&);
   /// Carries out the supervisor's decision: the command, the state and why it stopped.
-  void apply(core::ServoDecision const& d, std_msgs::Header const& header);
+  void apply(control::ServoDecision const& d, std_msgs::Header const& header);
   void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);
 
   ros::NodeHandle nh_, pnh_;
@@ -59,10 +59,10 @@ class VisualServoNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> listener_;
 
   std::mutex mutex_;  // guards everything below
-  core::ServoSupervisor supervisor_;
+  control::ServoSupervisor supervisor_;
   std::string arm_, robot_base_, robot_trocar_frame_, robot_instrument_frame_, trocar_prefix_;
   bool use_axis_through_ = true;  // the shaft's axis through its trocar when given (InstrumentAxis.axis_through)
-  std::optional<core::RcmJoints> joints_;
+  std::optional<control::RcmJoints> joints_;
   double joints_arrival_ = -1e300;
 
   // The diagnostics' view, copied by apply() (under mutex_): the updater never takes mutex_.
@@ -93,7 +93,7 @@ void VisualServoNodelet::onInit() {
   bool enabled = false, estimate_rotation = true;
   pnh_.param("enabled", enabled, false);
   pnh_.param("estimate_rotation", estimate_rotation, true);
-  core::SupervisorParams p;
+  control::SupervisorParams p;
   pnh_.param("stale_timeout", p.max_age, p.max_age);
   pnh_.param("max_jump", p.max_jump, p.max_jump);
   pnh_.param("use_axis_through", use_axis_through_, true);
@@ -102,12 +102,12 @@ void VisualServoNodelet::onInit() {
   std::vector<double> rpy{0, 0, 0};
   pnh_.param("camera_base_rpy_prior", rpy, rpy);
   if (rpy.size() != 3) rpy = {0, 0, 0};
-  core::CameraBaseRotation const rotation(
+  control::CameraBaseRotation const rotation(
       (Eigen::AngleAxisd(rpy[2], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(rpy[1], Eigen::Vector3d::UnitY()) *
        Eigen::AngleAxisd(rpy[0], Eigen::Vector3d::UnitX()))
           .toRotationMatrix()
           .transpose());  // prior of R_cb from the base -> camera pose guess
-  core::ServoParams sp;
+  control::ServoParams sp;
   pnh_.param("gain_at_zero", sp.gain_at_zero, sp.gain_at_zero);
   pnh_.param("gain_at_infinity", sp.gain_at_infinity, sp.gain_at_infinity);
   pnh_.param("gain_slope", sp.gain_slope, sp.gain_slope);
@@ -118,7 +118,7 @@ void VisualServoNodelet::onInit() {
   std::string lns;
   pnh_.param<std::string>("limits_namespace", lns, "/rcm_driver/limits");
   ros::NodeHandle ln(lns);
-  core::RcmLimits& L = p.limits;
+  control::RcmLimits& L = p.limits;
   ln.param("max_cone", L.max_cone, L.max_cone);
   ln.param("min_depth", L.min_depth, L.min_depth);
   ln.param("max_depth", L.max_depth, L.max_depth);
@@ -128,7 +128,7 @@ void VisualServoNodelet::onInit() {
   if (ln.getParam("max_acceleration", acc) && acc.size() == 4) L.max_acceleration = Eigen::Vector4d(acc[0], acc[1], acc[2], acc[3]);
   std::vector<double> vel;
   if (ln.getParam("max_velocity", vel) && vel.size() == 4) L.max_velocity = Eigen::Vector4d(vel[0], vel[1], vel[2], vel[3]);
-  supervisor_ = core::ServoSupervisor(p, sp, rotation);
+  supervisor_ = control::ServoSupervisor(p, sp, rotation);
   supervisor_.setInstrument(insertion_point_id);
   supervisor_.setEstimateRotation(estimate_rotation);
   supervisor_.setEnabled(enabled);
@@ -154,7 +154,7 @@ void VisualServoNodelet::onInit() {
 }
 
 void VisualServoNodelet::jointsCb(sensor_msgs::JointState::ConstPtr const& msg) {
-  core::RcmJoints q = core::RcmJoints::Zero();
+  control::RcmJoints q = control::RcmJoints::Zero();
   int found = 0;
   static char const* const names[4] = {"_pan", "_tilt", "_insertion", "_roll"};
   for (std::size_t i = 0; i < msg->name.size() && i < msg->position.size(); ++i)
@@ -172,7 +172,7 @@ void VisualServoNodelet::infoCb(sensor_msgs::CameraInfo::ConstPtr const& msg) {
 void VisualServoNodelet::targetCb(ServoTarget::ConstPtr const& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (msg->insertion_point_id >= 0) supervisor_.setInstrument(msg->insertion_point_id);
-  core::TargetRequest t;
+  control::TargetRequest t;
   t.mode = msg->mode;
   t.tip = Eigen::Vector3d(msg->tip.x, msg->tip.y, msg->tip.z);
   t.pixel = Eigen::Vector2d(msg->tip_px.x, msg->tip_px.y);
@@ -195,7 +195,7 @@ bool VisualServoNodelet::enableSrv(std_srvs::SetBool::Request& req, std_srvs::Se
   return true;
 }
 
-void VisualServoNodelet::apply(core::ServoDecision const& d, std_msgs::Header const& header) {
+void VisualServoNodelet::apply(control::ServoDecision const& d, std_msgs::Header const& header) {
   bool changed = false;
   {
     std::lock_guard<std::mutex> lock(status_mutex_);
@@ -215,10 +215,10 @@ void VisualServoNodelet::apply(core::ServoDecision const& d, std_msgs::Header co
     InstrumentVelocity c;
     c.header.stamp = ros::Time::now();
     c.header.frame_id = robot_trocar_frame_;
-    c.pan_rate = d.command(core::kPan);
-    c.tilt_rate = d.command(core::kTilt);
-    c.insertion_rate = d.command(core::kDepth);
-    c.roll_rate = d.command(core::kRoll);
+    c.pan_rate = d.command(control::kPan);
+    c.tilt_rate = d.command(control::kTilt);
+    c.insertion_rate = d.command(control::kDepth);
+    c.roll_rate = d.command(control::kRoll);
     command_pub_.publish(c);
     if (!d.reason.empty()) ROS_WARN_STREAM_THROTTLE(1.0, "VisualServo: stopped: " << d.reason);
   }
@@ -269,21 +269,21 @@ void VisualServoNodelet::instrumentsCb(InstrumentAxisArray::ConstPtr const& msg)
   auto const t0 = std::chrono::steady_clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
   double const steady_now = ros::SteadyTime::now().toSec();
-  core::ServoFrame f;
+  control::ServoFrame f;
   f.stamp = msg->header.stamp.toSec();
   int const id = supervisor_.instrument();
   // The instrument through our trocar in this frame.
   InstrumentAxis const* a = nullptr;
   for (auto const& x : msg->axes)
     if (id >= 0 && x.insertion_point_id == id && x.tip_valid) a = &x;
-  core::RobotSample r;
+  control::RobotSample r;
   if (a && supervisor_.enabled()) {
     Eigen::Vector3d tip(a->tip.x, a->tip.y, a->tip.z);
     f.direction = Eigen::Vector3d(a->axis.direction.x, a->axis.direction.y, a->axis.direction.z);
     // The axis through the trocar (fused with it: a short shaft's direction is fixed by its
     // trocar), and the tip on it: the point of that axis nearest the tip's viewing ray.
     if (auto const through = use_axis_through_ ? ros_io::throughFromMsg(*a) : std::nullopt)
-      if (auto const t = core::backProjectOntoAxis(through->axis, tip)) {
+      if (auto const t = geometry::backProjectOntoAxis(through->axis, tip)) {
         tip = *t;
         f.direction = through->axis.direction();
       }

@@ -118,7 +118,7 @@ std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::Ca
   };
 }
 
-bool toMsg(core::ApparentContour const& c, endo_guidance::ApparentContour& m) {
+bool toMsg(geometry::ApparentContour const& c, endo_guidance::ApparentContour& m) {
   for (int s = 0; s < 2; ++s) {
     if (!c.lines[s].allFinite() || !c.line_covariances[s].allFinite() || !std::isfinite(c.line_residual_px[s])) return false;
     m.lines[s].a = c.lines[s].x();
@@ -136,8 +136,8 @@ bool toMsg(core::ApparentContour const& c, endo_guidance::ApparentContour& m) {
   return true;
 }
 
-core::ApparentContour fromMsg(endo_guidance::ApparentContour const& m) {
-  core::ApparentContour c;
+geometry::ApparentContour fromMsg(endo_guidance::ApparentContour const& m) {
+  geometry::ApparentContour c;
   for (int s = 0; s < 2; ++s) {
     c.lines[s] = Eigen::Vector3d(m.lines[s].a, m.lines[s].b, m.lines[s].c);
     c.line_covariances[s] = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor> const>(m.lines[s].covariance.data());
@@ -153,7 +153,7 @@ core::ApparentContour fromMsg(endo_guidance::ApparentContour const& m) {
 
 namespace {
 // A finite axis and its covariance into a PluckerLine message and a row-major 6x6 array.
-bool axisToMsg(core::CylinderPose const& pose, endo_guidance::PluckerLine& line, boost::array<double, 36>& covariance) {
+bool axisToMsg(geometry::CylinderPose const& pose, endo_guidance::PluckerLine& line, boost::array<double, 36>& covariance) {
   Eigen::Vector3d const& d = pose.axis.direction();
   Eigen::Vector3d const& mo = pose.axis.moment();
   if (!d.allFinite() || !mo.allFinite() || !pose.covariance.allFinite()) return false;
@@ -168,7 +168,7 @@ bool axisToMsg(core::CylinderPose const& pose, endo_guidance::PluckerLine& line,
 }
 }  // namespace
 
-bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
+bool toMsg(geometry::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
            endo_guidance::InstrumentAxis& m) {
   if (!std::isfinite(radius) || !std::isfinite(residual_px) || !axisToMsg(pose, m.axis, m.covariance)) return false;
   m.radius = radius;
@@ -182,7 +182,7 @@ bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, st
   return true;
 }
 
-bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m) {
+bool setThrough(geometry::CylinderPose const& through, endo_guidance::InstrumentAxis& m) {
   endo_guidance::PluckerLine line;
   boost::array<double, 36> covariance{};
   m.through_valid = axisToMsg(through, line, covariance);
@@ -195,14 +195,14 @@ bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis
 
 namespace {
 // axisToMsg() back: nullopt unless the direction is unit, the moment orthogonal to it and both finite.
-std::optional<core::CylinderPose> axisFromMsg(endo_guidance::PluckerLine const& line, boost::array<double, 36> const& covariance) {
+std::optional<geometry::CylinderPose> axisFromMsg(endo_guidance::PluckerLine const& line, boost::array<double, 36> const& covariance) {
   Eigen::Vector3d const d(line.direction.x, line.direction.y, line.direction.z);
   Eigen::Vector3d const mo(line.moment.x, line.moment.y, line.moment.z);
   if (!d.allFinite() || !mo.allFinite() || std::abs(d.norm() - 1.0) > 1e-6 || std::abs(d.dot(mo)) > 1e-6 * (1.0 + mo.norm()))
     return std::nullopt;
-  auto const axis = core::PluckerLine::fromDirectionMoment(d, mo);
+  auto const axis = geometry::PluckerLine::fromDirectionMoment(d, mo);
   if (!axis) return std::nullopt;
-  core::CylinderPose p;
+  geometry::CylinderPose p;
   p.axis = *axis;
   p.covariance = Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor> const>(covariance.data());
   p.distance = p.axis.moment().norm();
@@ -211,14 +211,14 @@ std::optional<core::CylinderPose> axisFromMsg(endo_guidance::PluckerLine const& 
 }
 }  // namespace
 
-std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) { return axisFromMsg(m.axis, m.covariance); }
+std::optional<geometry::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m) { return axisFromMsg(m.axis, m.covariance); }
 
-std::optional<core::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m) {
+std::optional<geometry::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m) {
   if (!m.through_valid) return std::nullopt;
   return axisFromMsg(m.axis_through, m.covariance_through);
 }
 
-bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m) {
+bool toMsg(pipeline::InsertionPointReport const& r, endo_guidance::InsertionPoint& m) {
   auto const& e = r.estimate;
   if (!e.position.allFinite() || !e.covariance.allFinite() || !r.image_point.allFinite() || !std::isfinite(e.rms_distance) ||
       !std::isfinite(e.conditioning))
@@ -259,7 +259,7 @@ YAML::Node toYaml(XmlRpc::XmlRpcValue& v) {
 }
 }  // namespace
 
-std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, core::PipelineParams& params,
+std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, pipeline::PipelineParams& params,
                                             std::vector<std::string> const& own) {
   XmlRpc::XmlRpcValue all;
   if (!nh.getParam(nh.getNamespace(), all) || all.getType() != XmlRpc::XmlRpcValue::TypeStruct) return {};

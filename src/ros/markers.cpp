@@ -46,7 +46,7 @@ visualization_msgs::Marker deleteAll(std_msgs::Header const& header) {
 }
 
 void appendShaftMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header, int index,
-                        core::CylinderPose const& pose, double radius, std::optional<Eigen::Vector3d> const& tip, double length) {
+                        geometry::CylinderPose const& pose, double radius, std::optional<Eigen::Vector3d> const& tip, double length) {
   Eigen::Vector3d const d = pose.axis.direction();
   Eigen::Vector3d const p0 = d.cross(pose.axis.moment());  // axis point closest to the optical centre
   double const t_tip = tip ? d.dot(*tip - p0) : 0.0;
@@ -82,7 +82,7 @@ void appendShaftMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::
 }
 
 void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header,
-                         core::InsertionPointReport const& point, std::vector<Eigen::Vector3d> const& attached_points) {
+                         pipeline::InsertionPointReport const& point, std::vector<Eigen::Vector3d> const& attached_points) {
   Eigen::Vector3d const& X = point.estimate.position;
   // Located (published on tf): bright; well conditioned only (not yet a frame): amber; else dim.
   float const g = point.located ? 0.9f : point.well_conditioned ? 0.6f : 0.3f;
@@ -121,7 +121,7 @@ void appendTrocarMarkers(std::vector<visualization_msgs::Marker>& out, std_msgs:
 }
 
 void appendThroughMarker(std::vector<visualization_msgs::Marker>& out, std_msgs::Header const& header, int index,
-                         core::ConstrainedAxis const& through, std::optional<Eigen::Vector3d> const& tip) {
+                         geometry::ConstrainedAxis const& through, std::optional<Eigen::Vector3d> const& tip) {
   Eigen::Vector3d const d = through.pose.axis.direction();
   Eigen::Vector3d const p0 = d.cross(through.pose.axis.moment());  // axis point closest to the optical centre
   Eigen::Vector3d const a = p0 + d.dot(through.pivot - p0) * d;     // the pivot's foot (the pivot, up to the fit)

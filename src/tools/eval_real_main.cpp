@@ -31,17 +31,19 @@
 #include <tuple>
 
 #include "endo_guidance/io/yaml_config.h"
-#include "endo_guidance/core/insertion_point.h"
-#include "endo_guidance/core/insertion_point_image.h"
-#include "endo_guidance/core/insertion_point_tracker.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/geometry/insertion_point.h"
+#include "endo_guidance/geometry/insertion_point_image.h"
+#include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "hough_baseline.h"
 #include "shaft_scoring.h"
 #include "tool_util.h"
-#include "endo_guidance/core/segmentation.h"
+#include "endo_guidance/perception/segmentation.h"
 
 namespace fs = std::filesystem;
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::pipeline;
 namespace io = endo_guidance::io;
 
 namespace {

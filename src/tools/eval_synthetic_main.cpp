@@ -25,17 +25,20 @@
 #include <utility>
 #include <vector>
 
-#include "endo_guidance/core/insertion_point.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/geometry/insertion_point.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
 #include "hough_baseline.h"
 #include "tool_util.h"
-#include "endo_guidance/core/scene_renderer.h"
+#include "endo_guidance/sim/scene_renderer.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::sim;
+using namespace endo_guidance::pipeline;
 
 namespace {
 

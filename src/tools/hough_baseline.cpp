@@ -7,8 +7,8 @@
 
 namespace endo_guidance::tools {
 
-using core::ApparentContour;
-using core::ImageLine;
+using geometry::ApparentContour;
+using geometry::ImageLine;
 
 namespace {
 
@@ -60,7 +60,7 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
     s.len = (s.p1 - s.p0).norm();
     if (s.len < 1.0) continue;
     s.d = (s.p1 - s.p0) / s.len;
-    s.line = *core::lineThrough(s.p0, s.p1);  // (|p1 - p0| >= 1)
+    s.line = *geometry::lineThrough(s.p0, s.p1);  // (|p1 - p0| >= 1)
     seg.push_back(s);
   }
   double const cos_max = std::cos(p.max_pair_angle_deg * M_PI / 180.0);
@@ -142,7 +142,7 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
       cv::Vec4f f;
       cv::fitLine(pts, f, cv::DIST_L2, 0, 0.01, 0.01);
       Eigen::Vector2d const c(f[2], f[3]);
-      fitted[s] = *core::lineThrough(c, c + Eigen::Vector2d(f[0], f[1]));  // (fitLine's direction is a unit vector)
+      fitted[s] = *geometry::lineThrough(c, c + Eigen::Vector2d(f[0], f[1]));  // (fitLine's direction is a unit vector)
     }
     if (!ok) continue;
     // Normals toward the other side.
@@ -152,8 +152,8 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
     }
     ApparentContour c;
     c.lines = {fitted[0], fitted[1]};
-    ImageLine const axis = core::imageAxis(c);
-    Eigen::Vector2d const e0 = core::footOnLine(axis, at(*side[0], a, T0)), e1 = core::footOnLine(axis, at(*side[0], a, T1));
+    ImageLine const axis = geometry::imageAxis(c);
+    Eigen::Vector2d const e0 = geometry::footOnLine(axis, at(*side[0], a, T0)), e1 = geometry::footOnLine(axis, at(*side[0], a, T1));
     auto border = [&](Eigen::Vector2d const& q) {
       return std::min({q.x(), q.y(), bgr.cols - 1 - q.x(), bgr.rows - 1 - q.y()});
     };
@@ -162,7 +162,7 @@ std::vector<ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaseline
     bool dup = false;
     Eigen::Vector2d const m = 0.5 * (e0 + e1);
     for (auto const& o : out) {
-      ImageLine const oa = core::imageAxis(o);
+      ImageLine const oa = geometry::imageAxis(o);
       dup |= std::abs(oa.head<2>().dot(axis.head<2>())) >= cos_max && std::abs(dist(oa, m)) < p.duplicate_px;
     }
     if (dup) continue;

@@ -7,7 +7,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-#include "endo_guidance/core/apparent_contour.h"
+#include "endo_guidance/geometry/apparent_contour.h"
 
 namespace endo_guidance::tools {
 
@@ -33,6 +33,6 @@ struct HoughBaselineParams {
 /// across it: the baseline knows no field of view). Lines in ApparentContour order and
 /// orientation (left side first walking from the entry, normals toward the shaft); the entry is
 /// the strip's end nearer the image border. No residuals or covariances.
-std::vector<core::ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaselineParams const& p = {});
+std::vector<geometry::ApparentContour> detectShaftsHough(cv::Mat const& bgr, HoughBaselineParams const& p = {});
 
 }  // namespace endo_guidance::tools

@@ -19,8 +19,8 @@
 #include <mutex>
 
 #include "endo_guidance/InsertionPointArray.h"
-#include "endo_guidance/core/pipeline.h"
-#include "endo_guidance/core/scene_renderer.h"
+#include "endo_guidance/pipeline/pipeline.h"
+#include "endo_guidance/sim/scene_renderer.h"
 
 using namespace endo_guidance;
 
@@ -41,9 +41,9 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh;
   ros::AsyncSpinner spinner(4);
   spinner.start();
-  core::SyntheticSceneOptions so;
-  core::SyntheticScene scene(core::defaultInstruments(), so);
-  core::SceneRenderer renderer(so.width, so.height);
+  sim::SyntheticSceneOptions so;
+  sim::SyntheticScene scene(sim::defaultInstruments(), so);
+  sim::SceneRenderer renderer(so.width, so.height);
   std::vector<cv::Mat> images;
   for (int k = 0; k < frames; ++k) images.push_back(renderer.render(scene.frame(k), k));
   sensor_msgs::CameraInfo info;
@@ -110,7 +110,7 @@ int main(int argc, char** argv) {
     }
     ros::WallDuration(0.5).sleep();
     // The core alone on the same frames at the same pace (caches go as cold between frames).
-    core::Pipeline p(so.K, {640, 480});
+    pipeline::Pipeline p(so.K, {640, 480});
     std::vector<double> core_ms;
     ros::WallRate rc(rate);
     for (int k = 0; k < frames; ++k, rc.sleep()) {

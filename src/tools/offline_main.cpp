@@ -31,14 +31,16 @@
 #include <string>
 #include <vector>
 
-#include "endo_guidance/core/learned_shaft_detector.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/perception/learned_shaft_detector.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance_git_revision.h"
 #include "endo_guidance/io/yaml_config.h"
 #include "frame_sources.h"
 
 namespace fs = std::filesystem;
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::pipeline;
 namespace tools = endo_guidance::tools;
 namespace io = endo_guidance::io;
 

@@ -37,14 +37,14 @@ MaskShaft maskShaft(cv::Mat const& shaft, cv::Mat const& jaws) {
   return s;
 }
 
-double sideMedianPx(std::vector<Eigen::Vector2d> const& side, core::ImageLine const& l) {
+double sideMedianPx(std::vector<Eigen::Vector2d> const& side, geometry::ImageLine const& l) {
   std::vector<double> d;
   d.reserve(side.size());
   for (Eigen::Vector2d const& q : side) d.push_back(std::abs(l.dot(q.homogeneous())));
   return percentile(d, 0.5);
 }
 
-double findCost(MaskShaft const& s, core::ApparentContour const& c) {
+double findCost(MaskShaft const& s, geometry::ApparentContour const& c) {
   if (s.sides[0].empty()) return std::numeric_limits<double>::infinity();
   double const a00 = sideMedianPx(s.sides[0], c.lines[0]), a11 = sideMedianPx(s.sides[1], c.lines[1]);
   double const a01 = sideMedianPx(s.sides[0], c.lines[1]), a10 = sideMedianPx(s.sides[1], c.lines[0]);
@@ -60,7 +60,7 @@ StrictScore& StrictScore::operator+=(StrictScore const& o) {
   return *this;
 }
 
-StrictScore scoreStrict(std::vector<MaskShaft> const& shafts, std::vector<core::ApparentContour> const& detections) {
+StrictScore scoreStrict(std::vector<MaskShaft> const& shafts, std::vector<geometry::ApparentContour> const& detections) {
   StrictScore r;
   r.shafts = static_cast<int>(shafts.size());
   r.detections = static_cast<int>(detections.size());
@@ -84,7 +84,7 @@ StrictScore scoreStrict(std::vector<MaskShaft> const& shafts, std::vector<core::
   }
   for (std::size_t i = 0; i < shafts.size(); ++i) {
     if (r.match[i] < 0) continue;
-    core::ApparentContour const& c = detections[r.match[i]];
+    geometry::ApparentContour const& c = detections[r.match[i]];
     double const a00 = sideMedianPx(shafts[i].sides[0], c.lines[0]), a11 = sideMedianPx(shafts[i].sides[1], c.lines[1]);
     double const a01 = sideMedianPx(shafts[i].sides[0], c.lines[1]), a10 = sideMedianPx(shafts[i].sides[1], c.lines[0]);
     bool const straight = std::max(a00, a11) <= std::max(a01, a10);

@@ -9,7 +9,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-#include "endo_guidance/core/apparent_contour.h"
+#include "endo_guidance/geometry/apparent_contour.h"
 
 namespace endo_guidance::tools {
 
@@ -38,11 +38,11 @@ struct StrictScore {
 };
 
 /// The median distance of the side's pixels to line l (a^2 + b^2 = 1).
-double sideMedianPx(std::vector<Eigen::Vector2d> const& side, core::ImageLine const& l);
+double sideMedianPx(std::vector<Eigen::Vector2d> const& side, geometry::ImageLine const& l);
 /// The cost of detection c finding shaft s: the larger side median with the sides paired to the
 /// lines the better way round.
-double findCost(MaskShaft const& s, core::ApparentContour const& c);
+double findCost(MaskShaft const& s, geometry::ApparentContour const& c);
 /// One-to-one matching, cheapest pairs first, separately at each threshold.
-StrictScore scoreStrict(std::vector<MaskShaft> const& shafts, std::vector<core::ApparentContour> const& detections);
+StrictScore scoreStrict(std::vector<MaskShaft> const& shafts, std::vector<geometry::ApparentContour> const& detections);
 
 }  // namespace endo_guidance::tools

@@ -13,12 +13,12 @@
 #include <cstring>
 #include <string>
 
-#include "endo_guidance/core/cylinder_pose.h"
-#include "endo_guidance/core/insertion_point.h"
-#include "endo_guidance/core/insertion_point_image.h"
-#include "endo_guidance/core/insertion_point_tracker.h"
-#include "endo_guidance/core/scene_renderer.h"
-#include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/geometry/cylinder_pose.h"
+#include "endo_guidance/geometry/insertion_point.h"
+#include "endo_guidance/geometry/insertion_point_image.h"
+#include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "endo_guidance/sim/scene_renderer.h"
+#include "endo_guidance/sim/synthetic_scene.h"
 
 #include <cv_bridge/cv_bridge.h>
 #include <rosbag/bag.h>
@@ -29,7 +29,8 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::sim;
 
 namespace {
 void usage() {

@@ -4,15 +4,17 @@
 // back as valid must be finite: degenerate geometry is flagged, never guessed.
 #include <vector>
 
-#include "endo_guidance/core/constrained_axis.h"
-#include "endo_guidance/core/cylinder_pose.h"
-#include "endo_guidance/core/insertion_point.h"
-#include "endo_guidance/core/insertion_point_image.h"
-#include "endo_guidance/core/insertion_point_tracker.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/geometry/constrained_axis.h"
+#include "endo_guidance/geometry/cylinder_pose.h"
+#include "endo_guidance/geometry/insertion_point.h"
+#include "endo_guidance/geometry/insertion_point_image.h"
+#include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "fuzz_input.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::pipeline;
 using endo_guidance::fuzz::fail;
 using endo_guidance::fuzz::Input;
 

@@ -7,11 +7,13 @@
 #include <stdexcept>
 #include <string>
 
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
 #include "fuzz_input.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::pipeline;
 using endo_guidance::fuzz::fail;
 using endo_guidance::fuzz::Input;
 

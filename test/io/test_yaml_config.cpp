@@ -6,7 +6,9 @@
 
 #include "endo_guidance/io/yaml_config.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::perception;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::pipeline;
 namespace io = endo_guidance::io;
 
 namespace {

@@ -21,9 +21,9 @@ std_msgs::Header header() {
   return h;
 }
 
-core::ConstrainedAxis throughAxis(Eigen::Vector3d const& pivot, Eigen::Vector3d const& tip) {
-  core::ConstrainedAxis c;
-  c.pose.axis = *core::PluckerLine::through(pivot, tip);
+geometry::ConstrainedAxis throughAxis(Eigen::Vector3d const& pivot, Eigen::Vector3d const& tip) {
+  geometry::ConstrainedAxis c;
+  c.pose.axis = *geometry::PluckerLine::through(pivot, tip);
   c.pivot = pivot;
   return c;
 }
@@ -48,7 +48,7 @@ TEST(Markers, TheAxisThroughTheTrocarRunsFromThePivotToTheTip) {
 
 TEST(Markers, AnOffAxisTipIsDrawnAtItsFootAndNoTipAtTheOpticalCentresFoot) {
   Eigen::Vector3d const P(-0.08, 0.03, 0.02), T(0.0, 0.0, 0.10);
-  core::ConstrainedAxis const c = throughAxis(P, T);
+  geometry::ConstrainedAxis const c = throughAxis(P, T);
   Eigen::Vector3d const d = c.pose.axis.direction();
   Eigen::Vector3d const off = d.unitOrthogonal();  // a measured tip 2 mm beside the fused axis
   std::vector<visualization_msgs::Marker> out;
@@ -62,7 +62,7 @@ TEST(Markers, AnOffAxisTipIsDrawnAtItsFootAndNoTipAtTheOpticalCentresFoot) {
 }
 
 TEST(Markers, NothingIsDrawnForANonFiniteAxis) {
-  core::ConstrainedAxis c = throughAxis(Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d(0, 0, 0.1));
+  geometry::ConstrainedAxis c = throughAxis(Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d(0, 0, 0.1));
   c.pivot = Eigen::Vector3d::Constant(NAN);
   std::vector<visualization_msgs::Marker> out;
   ros_io::appendThroughMarker(out, header(), 0, c, Eigen::Vector3d(0, 0, 0.1));
@@ -73,7 +73,7 @@ TEST(Markers, NothingIsDrawnForANonFiniteAxis) {
 }
 
 TEST(Conversions, TheAxisThroughRoundTripsAndIsAbsentUnlessValid) {
-  core::ConstrainedAxis const c = throughAxis(Eigen::Vector3d(0.1, 0.02, 0.01), Eigen::Vector3d(0.01, -0.005, 0.12));
+  geometry::ConstrainedAxis const c = throughAxis(Eigen::Vector3d(0.1, 0.02, 0.01), Eigen::Vector3d(0.01, -0.005, 0.12));
   endo_guidance::InstrumentAxis m;
   EXPECT_FALSE(ros_io::throughFromMsg(m));  // through_valid false
   ASSERT_TRUE(ros_io::setThrough(c.pose, m));

@@ -25,8 +25,8 @@
 #include "endo_guidance/FreezeInsertionPoint.h"
 #include "endo_guidance/InstrumentAxisArray.h"
 #include "endo_guidance/ResetInsertionPoint.h"
-#include "endo_guidance/core/scene_renderer.h"
-#include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/sim/scene_renderer.h"
+#include "endo_guidance/sim/synthetic_scene.h"
 #include "endo_guidance/ros/conversions.h"
 #include "ros_test_main.h"
 
@@ -62,13 +62,13 @@ bool finite(std::initializer_list<double> v) {
 
 /// Distance (px) of a reported contour to the nearest true shaft: the largest distance of its
 /// lines to the ends of the true lines (at the true entry and tip).
-double nearestTruthPx(endo_guidance::ApparentContour const& m, std::vector<core::SyntheticView> const& views) {
+double nearestTruthPx(endo_guidance::ApparentContour const& m, std::vector<sim::SyntheticView> const& views) {
   double best = 1e9;
   for (auto const& v : views) {
     double e = 0.0;
     for (int s = 0; s < 2; ++s)
       for (auto const& q : {v.truth.entry_px, v.truth.tip_px}) {
-        Eigen::Vector2d const f = core::footOnLine(v.truth.lines[s], q);
+        Eigen::Vector2d const f = geometry::footOnLine(v.truth.lines[s], q);
         e = std::max(e, std::abs(m.lines[s].a * f.x() + m.lines[s].b * f.y() + m.lines[s].c));
       }
     best = std::min(best, e);
@@ -171,7 +171,7 @@ class Graph : public ::testing::Test {
   }
 
   ros::NodeHandle nh_;
-  core::SyntheticSceneOptions so_;
+  sim::SyntheticSceneOptions so_;
   ros::Publisher image_pub_, info_pub_, compressed_pub_;
   bool compressed_ = false;
   Latest<ApparentContourArray> contours_;
@@ -187,9 +187,9 @@ class Graph : public ::testing::Test {
   std::vector<ros::Subscriber> subs_;
 };
 
-using core::SceneRenderer;
-using core::SyntheticScene;
-using core::defaultInstruments;
+using sim::SceneRenderer;
+using sim::SyntheticScene;
+using sim::defaultInstruments;
 
 TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
   SyntheticScene scene(defaultInstruments(), so_);
@@ -246,7 +246,7 @@ TEST_F(Graph, ContoursAxesTrocarsAndTfMatchTheTruth) {
                           m.axis_through.moment.x, m.axis_through.moment.y, m.axis_through.moment.z}));
       for (double x : m.covariance_through) ASSERT_TRUE(std::isfinite(x));
       Eigen::Vector3d const dt(m.axis_through.direction.x, m.axis_through.direction.y, m.axis_through.direction.z);
-      core::PluckerLine const* truth = nullptr;
+      geometry::PluckerLine const* truth = nullptr;
       for (auto const& v : views)
         if (!truth || d.dot(v.axis.direction()) > d.dot(truth->direction())) truth = &v.axis;
       through_errors.push_back(std::acos(std::min(1.0, dt.dot(truth->direction()))) * 180.0 / M_PI);

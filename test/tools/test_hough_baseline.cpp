@@ -7,11 +7,12 @@
 
 #include <opencv2/core.hpp>
 
-#include "endo_guidance/core/scene_renderer.h"
-#include "endo_guidance/core/synthetic_scene.h"
+#include "endo_guidance/sim/scene_renderer.h"
+#include "endo_guidance/sim/synthetic_scene.h"
 #include "hough_baseline.h"
 
-using namespace endo_guidance::core;
+using namespace endo_guidance::geometry;
+using namespace endo_guidance::sim;
 using endo_guidance::tools::detectShaftsHough;
 
 namespace {

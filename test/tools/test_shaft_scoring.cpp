@@ -21,10 +21,10 @@ struct Scene {
 };
 
 // A contour with horizontal lines at rows ya and yb (oriented toward the shaft between them).
-core::ApparentContour contour(double ya, double yb) {
-  core::ApparentContour c;
-  c.lines[0] = core::ImageLine(0.0, 1.0, -ya);   // v - ya >= 0 below ya
-  c.lines[1] = core::ImageLine(0.0, -1.0, yb);   // yb - v >= 0 above yb
+geometry::ApparentContour contour(double ya, double yb) {
+  geometry::ApparentContour c;
+  c.lines[0] = geometry::ImageLine(0.0, 1.0, -ya);   // v - ya >= 0 below ya
+  c.lines[1] = geometry::ImageLine(0.0, -1.0, yb);   // yb - v >= 0 above yb
   c.entry_px = {0.0, 0.5 * (ya + yb)};
   c.tip_px = {400.0, 0.5 * (ya + yb)};
   return c;
@@ -43,11 +43,11 @@ TEST(ShaftScoring, SidesExcludeTheImageBorderAndTheJaws) {
       EXPECT_LT(q.x(), 400 - tools::kMaskMarginPx - 1 + 1e-9);  // not within 4 px of the jaws
     }
   // The two sides are the top and bottom rows (the ends across the shaft are near the jaws or the border).
-  double const top = tools::sideMedianPx(m.sides[0], core::ImageLine(0, 1, -200));
-  double const bottom = tools::sideMedianPx(m.sides[1], core::ImageLine(0, 1, -239));
+  double const top = tools::sideMedianPx(m.sides[0], geometry::ImageLine(0, 1, -200));
+  double const bottom = tools::sideMedianPx(m.sides[1], geometry::ImageLine(0, 1, -239));
   EXPECT_TRUE((top == 0.0 && bottom == 0.0) ||
-              (tools::sideMedianPx(m.sides[1], core::ImageLine(0, 1, -200)) == 0.0 &&
-               tools::sideMedianPx(m.sides[0], core::ImageLine(0, 1, -239)) == 0.0));
+              (tools::sideMedianPx(m.sides[1], geometry::ImageLine(0, 1, -200)) == 0.0 &&
+               tools::sideMedianPx(m.sides[0], geometry::ImageLine(0, 1, -239)) == 0.0));
 }
 
 TEST(ShaftScoring, FoundAtEachThresholdAndFalseBeyondTheLast) {

@@ -9,10 +9,10 @@
 #include <string>
 #include <vector>
 
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/pipeline/pipeline.h"
 
 namespace endo_guidance::io {
-using core::PipelineParams;
+using pipeline::PipelineParams;
 
 /// A pinhole camera as in sensor_msgs/CameraInfo.
 struct CameraModel {
@@ -39,8 +39,8 @@ void loadPipelineYaml(std::string const& path, PipelineParams& params);
 /// The same from YAML text.
 void parsePipelineYaml(std::string const& text, PipelineParams& params);
 /// segmentation/detector's values: "colour" or "learned" (std::runtime_error otherwise).
-core::SegmentationParams::Detector detectorFromString(std::string const& name);
-char const* toString(core::SegmentationParams::Detector d);
+perception::SegmentationParams::Detector detectorFromString(std::string const& name);
+char const* toString(perception::SegmentationParams::Detector d);
 
 }  // namespace endo_guidance::io
 

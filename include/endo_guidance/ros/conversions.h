@@ -16,7 +16,7 @@
 #include "endo_guidance/ApparentContour.h"
 #include "endo_guidance/InsertionPoint.h"
 #include "endo_guidance/InstrumentAxis.h"
-#include "endo_guidance/core/pipeline.h"
+#include "endo_guidance/pipeline/pipeline.h"
 
 namespace endo_guidance::ros_io {
 
@@ -37,25 +37,25 @@ bool sameCameraScale(sensor_msgs::CameraInfo const& a, sensor_msgs::CameraInfo c
 /// tabulated at every pixel when built (build it once per camera model), interpolated per point.
 std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::CameraInfo const& info);
 
-bool toMsg(core::ApparentContour const& c, endo_guidance::ApparentContour& m);
-core::ApparentContour fromMsg(endo_guidance::ApparentContour const& m);
-bool toMsg(core::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
+bool toMsg(geometry::ApparentContour const& c, endo_guidance::ApparentContour& m);
+geometry::ApparentContour fromMsg(endo_guidance::ApparentContour const& m);
+bool toMsg(geometry::CylinderPose const& pose, double radius, double residual_px, std::optional<Eigen::Vector3d> const& tip,
            endo_guidance::InstrumentAxis& m);
 /// nullopt unless the direction is unit, the moment orthogonal to it and both finite.
-std::optional<core::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m);
+std::optional<geometry::CylinderPose> fromMsg(endo_guidance::InstrumentAxis const& m);
 /// Fills the axis through the insertion point (through_valid, axis_through, covariance_through):
 /// false (and through_valid false) when it is not finite.
-bool setThrough(core::CylinderPose const& through, endo_guidance::InstrumentAxis& m);
+bool setThrough(geometry::CylinderPose const& through, endo_guidance::InstrumentAxis& m);
 /// setThrough() back: the axis through the insertion point, nullopt unless through_valid and
 /// valid as fromMsg() requires.
-std::optional<core::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m);
-bool toMsg(core::InsertionPointReport const& r, endo_guidance::InsertionPoint& m);
+std::optional<geometry::CylinderPose> throughFromMsg(endo_guidance::InstrumentAxis const& m);
+bool toMsg(pipeline::InsertionPointReport const& r, endo_guidance::InsertionPoint& m);
 
 /// Reads the pipeline parameters (keys of config/pipeline.yaml) from `nh`'s namespace over the
 /// defaults in `params`. Keys listed in `own` belong to the node and are skipped; any other
 /// unknown key is returned (the node warns: a typo is not silently ignored). Throws
 /// std::runtime_error on a value of the wrong type.
-std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, core::PipelineParams& params,
+std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, pipeline::PipelineParams& params,
                                             std::vector<std::string> const& own = {});
 
 }  // namespace endo_guidance::ros_io

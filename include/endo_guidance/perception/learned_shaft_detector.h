@@ -1,0 +1,82 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/field_of_view.h"
+#include "endo_guidance/perception/region_growing.h"
+
+namespace endo_guidance::perception {
+
+/// The package's shaft network (models/shaft_net.yaml; scripts/train_shaft_net.sh reproduces it).
+std::string defaultShaftModel();
+
+struct LearnedDetectorParams {
+  std::string model;               ///< the model's YAML (input size, normalisation, ONNX file); empty: defaultShaftModel()
+  int threads = 1;                 ///< OpenCV threads (cv::setNumThreads(): process-wide)
+};
+
+/// The per-pixel shaft network, run by OpenCV's DNN module on the CPU (no training framework at
+/// run time). The YAML beside the ONNX file gives the input size, the normalisation
+/// ((BGR - mean) * scale) and the class order (background, shaft, jaws). A missing or unreadable
+/// model throws std::runtime_error at construction, never per frame.
+class ShaftNet {
+ public:
+  explicit ShaftNet(std::string const& yaml_path, int threads = 1);
+  ~ShaftNet();
+  ShaftNet(ShaftNet const&) = delete;
+  ShaftNet& operator=(ShaftNet const&) = delete;
+  /// Class logits (CV_32F, 1 x classes x height x width) of one BGR frame, resized to the input
+  /// (the network's own buffer: valid until the next call).
+  cv::Mat logits(cv::Mat const& bgr);
+  /// The shaft class's softmax probability (CV_32F, input size) of one BGR frame.
+  cv::Mat shaftProbability(cv::Mat const& bgr);
+  cv::Size inputSize() const { return size_; }
+  std::vector<std::string> const& classes() const { return classes_; }
+
+ private:
+  struct Impl;  // the cv::dnn::Net (opencv2/dnn.hpp stays out of this header)
+  std::unique_ptr<Impl> impl_;
+  cv::Size size_;
+  double mean_ = 0.0, scale_ = 1.0;
+  std::vector<std::string> classes_;
+  int shaft_ = 1;
+};
+
+/// The learned shaft detector's proposals: the connected components of the network's shaft mask
+/// (p >= 1/2 on the probability resized to the view's size, inside the view; fewer than min_area
+/// pixels dropped). A component that enters the view at several places (shafts whose tips touch,
+/// or that cross) is split between its entries, each pixel to the entry nearest along the
+/// component. Each part is a Region seeded at the middle of its longest run on the view's border
+/// (its entry), or, off the border, at its boundary point nearest to it.
+std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov, int min_area,
+                                        int border_margin);
+
+/// The side pair of a mask component, for refineContour(): its boundary points off the view's
+/// edge (3 border_margin) and short of the far end by one width (the tip), split by the
+/// component's principal axis (second moments of its outline), one LMedS line per side
+/// ([Rousseeuw87]), oriented toward the shaft. A mask's outline is no chain of straight runs from
+/// the entry (the network's edge wanders by a few px): the principal axis splits it where
+/// following it from the entry does not. Rejection kTooFewPoints when a side has fewer than
+/// min_side_points, kNotStraight when under min_inlier_fraction of them lie on its line.
+SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
+
+/// The contour on the mask's own sides, where the frame has no edge that agrees with them (a
+/// grey shaft on pale tissue, a printed band along the shaft): the side pair's lines refitted by
+/// least squares to its points (rectifyContour(), identity mapping) with `sigma_floor_px` as the
+/// systematic floor of their covariance, ordered as refineContour() orders them, the tip at the
+/// region's farthest point between them along their bisector, and the same
+/// shape checks on length, width, elongation, widening and the angle between the lines.
+/// ContourFit::edges: the side points behind each line (contour order).
+ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
+                       double sigma_floor_px);
+
+/// Whether each of the contour's lines lies within gate_px (median) of a different side of the
+/// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
+bool agreesWithMask(geometry::ApparentContour const& c, SideFit const& sides, double gate_px);
+
+}  // namespace endo_guidance::perception
