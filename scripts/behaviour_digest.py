@@ -25,16 +25,6 @@ HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = ("clean", "hard", "black_circular")
 FRAMES = 60          # per rendered scene: long enough for the trocars to be located
 ROBOTIC_FRAMES = 40  # per robotic video (first frames)
-# The in-vivo stills come without a calibration: an assumed 640x480 camera (as the evaluation's).
-INVIVO_CAMERA = """image_width: 640
-image_height: 480
-camera_name: assumed_640x480
-camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}
-distortion_model: plumb_bob
-distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}
-rectification_matrix: {rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}
-projection_matrix: {rows: 3, cols: 4, data: [500, 0, 320, 0, 0, 500, 240, 0, 0, 0, 1, 0]}
-"""
 
 
 def run(cmd):
@@ -74,9 +64,7 @@ def inputs(binary, tmp, shared):
         out.append(("rendered/%s/learned" % scene, base + ["--detector", "learned"]))
     if shared:
         invivo = os.path.join(shared, "endovis15_rigid_invivo")
-        invivo_cam = os.path.join(tmp, "invivo_camera.yaml")
-        with open(invivo_cam, "w") as f:
-            f.write(INVIVO_CAMERA)
+        invivo_cam = os.path.join(HERE, "config", "cameras", "assumed_640x480.yaml")
         for op in ("OP1", "OP2", "OP3"):
             raw = os.path.join(invivo, op, "Raw")
             if os.path.isdir(raw):

@@ -29,15 +29,7 @@ import tempfile
 import cv2
 import numpy as np
 
-CAMERA = """image_width: 640
-image_height: 480
-camera_name: assumed
-camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}
-distortion_model: plumb_bob
-distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}
-rectification_matrix: {rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}
-projection_matrix: {rows: 3, cols: 4, data: [500, 0, 320, 0, 0, 500, 240, 0, 0, 0, 1, 0]}
-"""
+CAMERA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "cameras", "assumed_640x480.yaml")
 OFFS = np.arange(-8.0, 8.01, 0.5)  # px along the line's normal, toward the shaft
 WINDOW = np.abs(OFFS) <= 6.0
 
@@ -113,9 +105,7 @@ def main():
         return 0
     stills = sorted(glob.glob(os.path.join(inv, "OP*", "Raw", "*_raw.png")))
     with tempfile.TemporaryDirectory() as tmp:
-        cam = os.path.join(tmp, "camera.yaml")
-        with open(cam, "w") as fh:
-            fh.write(CAMERA)
+        cam = CAMERA
         out = os.path.join(tmp, "stills.jsonl")
         subprocess.run([a.offline, "--camera", cam, "--radius", "0.0025", "--independent", "--quiet", "--output", out] + stills,
                        check=True)
