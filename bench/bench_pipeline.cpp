@@ -18,10 +18,10 @@
 
 #include "endo_guidance/perception/colour_feature.h"
 #include "endo_guidance/perception/image_reduction.h"
-#include "endo_guidance/pipeline/pipeline.h"
-#include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/perception/sigma_filter.h"
 #include "endo_guidance/perception/strip_search.h"
+#include "endo_guidance/pipeline/pipeline.h"
+#include "endo_guidance/sim/scene_renderer.h"
 #include "hough_baseline.h"
 #include "ratio_reporter.h"
 

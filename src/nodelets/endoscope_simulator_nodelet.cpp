@@ -25,9 +25,9 @@
 
 #include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/InstrumentAxisArray.h"
+#include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
-#include "endo_guidance/ros/conversions.h"
 
 namespace endo_guidance {
 

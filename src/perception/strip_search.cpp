@@ -1,5 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/perception/strip_search.h"
+
 #include "endo_guidance/perception/image_reduction.h"
 
 #include <algorithm>

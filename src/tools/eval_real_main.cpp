@@ -30,10 +30,10 @@
 #include <string>
 #include <tuple>
 
-#include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/geometry/insertion_point.h"
 #include "endo_guidance/geometry/insertion_point_image.h"
 #include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "endo_guidance/io/yaml_config.h"
 #include "endo_guidance/pipeline/pipeline.h"
 #include "hough_baseline.h"
 #include "shaft_scoring.h"

@@ -26,8 +26,8 @@
 #include <vector>
 
 #include "endo_guidance/geometry/insertion_point.h"
-#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "hough_baseline.h"
 #include "tool_util.h"
 #include "endo_guidance/sim/scene_renderer.h"

@@ -7,8 +7,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/io/yaml_config.h"
+#include "endo_guidance/pipeline/pipeline.h"
 #include "fuzz_input.h"
 
 using namespace endo_guidance::perception;

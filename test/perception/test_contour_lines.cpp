@@ -7,11 +7,11 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/perception/colour_feature.h"
 #include "endo_guidance/perception/contour_lines.h"
-#include "endo_guidance/geometry/cylinder_pose.h"
-#include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/perception/segmentation.h"
+#include "endo_guidance/sim/scene_renderer.h"
 
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;

@@ -7,9 +7,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/perception/contour_tracking.h"
+#include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
-#include "endo_guidance/perception/segmentation.h"
 
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;

@@ -10,8 +10,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/perception/learned_shaft_detector.h"
-#include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/perception/segmentation.h"
+#include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 
 using namespace endo_guidance::perception;

@@ -8,9 +8,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/perception/colour_feature.h"
+#include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/sim/scene_renderer.h"
-#include "endo_guidance/perception/segmentation.h"
 
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;

@@ -21,13 +21,13 @@
 #include <mutex>
 
 #include "endo_guidance/ApparentContourArray.h"
-#include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/FreezeInsertionPoint.h"
+#include "endo_guidance/InsertionPointArray.h"
 #include "endo_guidance/InstrumentAxisArray.h"
 #include "endo_guidance/ResetInsertionPoint.h"
+#include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
-#include "endo_guidance/ros/conversions.h"
 #include "ros_test_main.h"
 
 using namespace endo_guidance;

@@ -11,8 +11,8 @@
 #include "endo_guidance/geometry/constrained_axis.h"
 #include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/geometry/insertion_point_tracker.h"
-#include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/geometry/shaft_tracking.h"
+#include "endo_guidance/perception/segmentation.h"
 
 namespace endo_guidance::pipeline {
 
