@@ -76,7 +76,7 @@ void InsertionPointsNodelet::onInit() {
   try {
     for (auto const& k : ros_io::loadPipelineParams(
              pnh_, params_, {"frame_prefix", "publish_tf", "reset_on_time_jump", "expected_rate", "next_id"}))
-      NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
+      if (!ros_io::isReconfigureMirror<InsertionPointsConfig>(k)) NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
     params_ = pipeline::PipelineParams{};

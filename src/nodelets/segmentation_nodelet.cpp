@@ -76,7 +76,7 @@ void SegmentationNodelet::onInit() {
   pnh_.param("reset_on_time_jump", reset_on_time_jump_, true);
   try {
     for (auto const& k : ros_io::loadPipelineParams(pnh_, params_, {"queue_size", "reset_on_time_jump", "image_transport", "expected_rate"}))
-      NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
+      if (!ros_io::isReconfigureMirror<SegmentationConfig>(k)) NODELET_WARN_STREAM("unknown parameter '" << k << "' ignored");
   } catch (std::exception const& e) {
     NODELET_ERROR_STREAM("bad parameters, using the defaults: " << e.what());
     params_ = pipeline::PipelineParams{};
