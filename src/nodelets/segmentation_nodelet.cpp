@@ -19,6 +19,7 @@
 #include "endo_guidance/SegmentationConfig.h"
 #include "endo_guidance/geometry/shaft_tracking.h"
 #include "endo_guidance/io/yaml_config.h"
+#include "endo_guidance/perception/rectification.h"
 #include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/ros/conversions.h"

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/perception/rectification.h"
 
 namespace endo_guidance::perception {
 

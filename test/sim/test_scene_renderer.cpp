@@ -6,7 +6,7 @@
 
 #include <random>
 
-#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 

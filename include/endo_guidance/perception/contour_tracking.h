@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "endo_guidance/geometry/apparent_contour.h"
-#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/field_of_view.h"
 
 namespace endo_guidance::perception {

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/field_of_view.h"
 #include "endo_guidance/perception/region_growing.h"
 

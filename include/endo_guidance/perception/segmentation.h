@@ -10,7 +10,7 @@
 
 #include "endo_guidance/geometry/apparent_contour.h"
 #include "endo_guidance/perception/colour_feature.h"
-#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/contour_tracking.h"
 #include "endo_guidance/perception/field_of_view.h"
 #include "endo_guidance/perception/learned_shaft_detector.h"

@@ -9,7 +9,8 @@
 
 #include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/perception/colour_feature.h"
-#include "endo_guidance/perception/contour_lines.h"
+#include "endo_guidance/perception/contour_fit.h"
+#include "endo_guidance/perception/rectification.h"
 #include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/sim/scene_renderer.h"
 

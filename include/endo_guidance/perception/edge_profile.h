@@ -1,0 +1,57 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <optional>
+#include <vector>
+
+#include "endo_guidance/geometry/apparent_contour.h"
+#include "endo_guidance/perception/colour_feature.h"
+#include "endo_guidance/perception/contour_params.h"
+#include "endo_guidance/perception/line_fit.h"
+
+namespace endo_guidance::perception {
+
+/// Scale of the red-green opponent term of edgeChannel(): pure red keeps the feature's weight
+/// (w(0 deg) = 4/3, colour_feature.h).
+constexpr float kRedGreenScale = 4.0f / 3.0f;
+/// The channel in which the contour lines are located with sub-pixel precision (steepest descent
+/// from tissue into the shaft): E = (1 - w) (max - min) + w k (R - G), k = kRedGreenScale.
+/// The chroma separates grey and black shafts from saturated tissue but is rectified (noise moves
+/// the edge outward) and high on metal mirroring fat; the red-green term is linear in the colour
+/// and high on red and pink tissue only (docs/known-limits.md: the opt-in edge channel).
+inline float edgeChannel(float b, float g, float r, float w) {
+  return (1.f - w) * ColourFeature::chroma(b, g, r) + (w * kRedGreenScale) * (r - g);
+}
+
+/// The edges found on the profiles across `line` at t0 + j step along it (nullopt: no edge on
+/// that profile), with the parameters of widePass().
+struct ProfileEdges {
+  geometry::ImageLine line = geometry::ImageLine::Zero();
+  double t0 = 0.0, step = 0.0;
+  std::vector<std::optional<Eigen::Vector2d>> edges;
+};
+/// The sub-pixel API: the edge points of a shaft side on profiles across `line` (full-res px,
+/// positive side = shaft) every refine_step_px for t in [t0, t1] along its direction (-b, a),
+/// each at the steepest descent of edgeChannel() from tissue into the shaft (the centroid of the
+/// slope's lobe), then a robust least-squares line (Tukey biweight) with its covariance.
+std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& params);
+/// The parameters of the first, wide sub-pixel pass (coarse_halfwidth_px, profiles sampled at
+/// twice profile_step_px), which recentres a line before the narrow pass.
+ContourLinesParams widePass(ContourLinesParams const& params);
+
+/// refineLineSubpixel() taking the profiles of `reuse` where line and t0 are the same (its step a
+/// multiple of refine_step_px), and keeping every profile's edge in `record`.
+std::optional<RefinedLine> refineLineProfiles(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
+                                              ContourLinesParams const& params, ProfileEdges const* reuse, ProfileEdges* record);
+/// A refined line (over [t0, t1] along its direction (-b, a)) followed beyond that extent, within
+/// [t_lo, t_hi]: one narrow profile every refine_step_px, kept while its edge lies on the line
+/// (within max(3 residuals, extend_gate_px)), until extend_max_misses profiles in a row miss;
+/// past a gap of more than 3 profiles, the edge counts again only once 4 profiles in a row hold
+/// it. The line refitted over all its points, refitted every 16 new ones on the way. nullopt:
+/// nothing added, or the extension made the residual worse (another edge).
+std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
+                                              double t_lo, double t_hi, ContourLinesParams const& params);
+
+}  // namespace endo_guidance::perception

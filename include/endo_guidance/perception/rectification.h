@@ -1,0 +1,26 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "endo_guidance/geometry/apparent_contour.h"
+#include "endo_guidance/perception/contour_params.h"
+
+namespace endo_guidance::perception {
+
+/// Lens distortion: the contour lines refitted (least squares, with covariance) to the edge
+/// points mapped by `rectify` (distorted pixel -> pixel of the rectified camera), the entry and
+/// tip mapped too. The image is never remapped: a straight shaft edge is a curve in the
+/// distorted image and a line again after the mapping. nullopt when a side keeps fewer than
+/// min_points mapped points or the refitted lines cross. `sigma_floor_px`: as
+/// ContourLinesParams::line_sigma_floor_px.
+std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContour const& contour,
+                                              std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                                              std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
+                                              int min_points = 8, double sigma_floor_px = ContourLinesParams{}.line_sigma_floor_px);
+
+}  // namespace endo_guidance::perception

@@ -1,0 +1,45 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/perception/rectification.h"
+
+#include <cmath>
+
+#include "endo_guidance/perception/line_fit.h"
+
+namespace endo_guidance::perception {
+
+std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContour const& contour,
+                                              std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                                              std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
+                                              int min_points, double sigma_floor_px) {
+  geometry::ApparentContour out = contour;
+  out.entry_px = rectify(contour.entry_px);
+  out.tip_px = rectify(contour.tip_px);
+  // A point inside the shaft (between the lines, half-way along): it stays inside after the
+  // mapping and orients the refitted lines.
+  Eigen::Vector2d const mid = 0.5 * (contour.entry_px + contour.tip_px);
+  Eigen::Vector2d const inside = rectify(0.5 * (geometry::footOnLine(contour.lines[0], mid) + geometry::footOnLine(contour.lines[1], mid)));
+  for (int s = 0; s < 2; ++s) {
+    std::vector<Eigen::Vector2d> pts;
+    pts.reserve(edges[s].size());
+    for (auto const& q : edges[s]) {
+      Eigen::Vector2d const r = rectify(q);
+      if (r.allFinite()) pts.push_back(r);
+    }
+    if (static_cast<int>(pts.size()) < min_points) return std::nullopt;
+    auto l = fitLineLS(pts);
+    if (!l) return std::nullopt;
+    if (l->head<2>().dot(inside) + l->z() < 0.0) *l = -*l;
+    auto const r = summarizeLine(*l, pts, std::vector<double>(pts.size(), 1.0), min_points, sigma_floor_px);
+    if (!r) return std::nullopt;
+    out.lines[s] = r->line;
+    out.line_covariances[s] = r->covariance;
+    out.line_residual_px[s] = r->residual_px;
+  }
+  out.residual_px = std::sqrt(0.5 * (out.line_residual_px[0] * out.line_residual_px[0] +
+                                     out.line_residual_px[1] * out.line_residual_px[1]));
+  Eigen::Vector3d const in(inside.x(), inside.y(), 1.0);
+  if (!(out.lines[0].dot(in) > 0.0 && out.lines[1].dot(in) > 0.0)) return std::nullopt;
+  return out;
+}
+
+}  // namespace endo_guidance::perception
