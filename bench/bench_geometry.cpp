@@ -13,11 +13,13 @@
 #include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/geometry/insertion_point.h"
 #include "endo_guidance/geometry/insertion_point_tracker.h"
+#include "cylinder_pose_conic.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 #include "ratio_reporter.h"
 
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
+using endo_guidance::test::estimateCylinderPoseConic;
 
 namespace {
 

@@ -72,12 +72,14 @@ def main():
             sys.exit("soak_monitor: no ROS master at %s after 30 s" % os.environ.get("ROS_MASTER_URI"))
         time.sleep(0.5)
     import rospy
-    from endo_guidance.msg import InstrumentAxisArray, ServoTarget
+    from endo_guidance.msg import InsertionPointArray, InstrumentAxisArray, ServoState, ServoTarget
     from sensor_msgs.msg import CameraInfo
     from tf2_msgs.msg import TFMessage
     rospy.init_node("soak", anonymous=False)
     lock = threading.Lock()
     infos, seen, latencies = set(), set(), []
+    # What the graph saw, per minute: to tell a change of the scene from a drift of the code.
+    shafts, stops, located = [], {}, set()
 
     def on_info(m):
         with lock:
@@ -86,6 +88,16 @@ def main():
     def on_instruments(m):
         with lock:
             seen.add(m.header.stamp.to_nsec())
+            shafts.append(len(m.axes))
+
+    def on_points(m):
+        with lock:
+            located.update(p.id for p in m.points if p.located)
+
+    def on_state(m):
+        if m.reason:
+            with lock:
+                stops[m.reason.split(" (")[0]] = stops.get(m.reason.split(" (")[0], 0) + 1
 
     def on_tf(m):
         now = rospy.Time.now()
@@ -98,6 +110,8 @@ def main():
     rospy.Subscriber("/endoscope/camera_info", CameraInfo, on_info, queue_size=200)
     rospy.Subscriber("/endoscope/instruments", InstrumentAxisArray, on_instruments, queue_size=200)
     rospy.Subscriber("/tf", TFMessage, on_tf, queue_size=500)
+    rospy.Subscriber("/endoscope/insertion_points", InsertionPointArray, on_points, queue_size=20)
+    rospy.Subscriber("/visual_servo/state", ServoState, on_state, queue_size=200)
     target = rospy.Publisher("/visual_servo/target", ServoTarget, queue_size=2, latch=True)
     tips = [(0.0, 0.01, 0.12), (0.015, 0.025, 0.13)]
     rospy.sleep(a.warmup)
@@ -124,16 +138,20 @@ def main():
             infos.difference_update(done)
             dropped = sum(1 for s in done if s not in seen)
             seen.difference_update({s for s in seen if s < cut})
+            scene = {"shafts_per_frame": round(sum(shafts) / len(shafts), 3) if shafts else None,
+                     "trocars_located": sorted(located), "servo_stops": dict(stops)}
+            shafts.clear(), stops.clear(), located.clear()
         rss = {n: rss_kb(p) for n, p in node_pids().items()}
         s = {"minute": len(samples) + 1, "frames": len(done), "dropped": dropped,
              "p50_ms": lat[len(lat) // 2] if lat else None, "p99_ms": lat[int(len(lat) * 0.99)] if lat else None,
-             "rss_kb": {n: v for n, v in rss.items() if v is not None}}
+             "rss_kb": {n: v for n, v in rss.items() if v is not None}, **scene}
         samples.append(s)
         jsonl.write(json.dumps(s) + "\n")
         jsonl.flush()
-        print("[soak] minute %d: %d frames, %d dropped, tf latency p50 %s ms p99 %s ms, manager %s kB" % (
-            s["minute"], s["frames"], dropped, s["p50_ms"] and round(s["p50_ms"], 2), s["p99_ms"] and round(s["p99_ms"], 2),
-            s["rss_kb"].get("/sim_manager")), flush=True)
+        print("[soak] minute %d: %d frames, %d dropped, tf latency p50 %s ms p99 %s ms, manager %s kB; %s shafts per frame, "
+              "trocars %s, servo stops %s" % (
+                  s["minute"], s["frames"], dropped, s["p50_ms"] and round(s["p50_ms"], 2), s["p99_ms"] and round(s["p99_ms"], 2),
+                  s["rss_kb"].get("/sim_manager"), s["shafts_per_frame"], s["trocars_located"], s["servo_stops"]), flush=True)
     sys.exit(verdict(samples, a))
 
 

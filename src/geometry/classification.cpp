@@ -7,7 +7,7 @@
 namespace endo_guidance::geometry {
 
 namespace {
-// Keeps the nearest and second nearest; thresholds each candidate with its own tau.
+// Keeps the nearest and second nearest candidate, and whether the nearest is within its threshold.
 struct Best {
   Attachment a{-1, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
   int nearest = -1;
@@ -28,35 +28,6 @@ struct Best {
   }
 };
 }  // namespace
-
-Attachment classifyImageLine(ImageLine const& l_in, std::vector<Eigen::Vector3d> const& pts, double tau_px,
-                             double tau_rad) {
-  Best best;
-  auto const l = normalizeLine(l_in);
-  if (!l) return best.result();
-  for (std::size_t j = 0; j < pts.size(); ++j) {
-    Eigen::Vector3d const& i = pts[j];
-    double const w = i.z();
-    if (std::abs(w) > 1e-12 * i.head<2>().norm()) {
-      double const dist = std::abs(l->dot(i / w));  // Eq. (6), pixels
-      best.offer(static_cast<int>(j), dist / tau_px, dist < tau_px);
-    } else {
-      double const dn = i.head<2>().norm();
-      if (!(dn > 0.0)) continue;
-      // Direction (u, v) must be parallel to the line: |n . dir| = |sin(angle)|.
-      double const ang = std::asin(std::min(1.0, std::abs(l->head<2>().dot(i.head<2>() / dn))));
-      best.offer(static_cast<int>(j), ang / tau_rad, ang < tau_rad);
-    }
-  }
-  Attachment a = best.result();
-  // Report distances in the unit of the nearest candidate (scaled by its tau above).
-  if (best.nearest >= 0) {
-    double const unit = std::abs(pts[static_cast<std::size_t>(best.nearest)].z()) > 0.0 ? tau_px : tau_rad;
-    a.distance *= unit;
-    a.second *= unit;
-  }
-  return a;
-}
 
 Attachment classifyAxis(PluckerLine const& axis, std::vector<Eigen::Vector3d> const& points, double tau_m) {
   Best best;

@@ -8,6 +8,7 @@
 #include <visp3/core/vpHomogeneousMatrix.h>
 
 #include "endo_guidance/geometry/cylinder_pose.h"
+#include "cylinder_pose_conic.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 #include "test_util.h"
 
@@ -15,6 +16,7 @@ using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
 namespace test = endo_guidance::test;
 using test::defaultK;
+using test::estimateCylinderPoseConic;
 
 namespace {
 double relErr(PluckerLine const& e, PluckerLine const& t) {
