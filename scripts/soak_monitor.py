@@ -7,6 +7,7 @@ against the targets (memory growth < 1 MB over the last 20 minutes, p99 drift < 
 import argparse
 import json
 import os
+import re
 import sys
 import threading
 import time
@@ -95,9 +96,10 @@ def main():
             located.update(p.id for p in m.points if p.located)
 
     def on_state(m):
-        if m.reason:
+        if m.reason:  # counted by kind: the numbers and the details left out
+            kind = re.sub(r"[0-9][0-9.]*", "N", m.reason.split(":")[0] if m.reason.startswith("tf missing") else m.reason)[:60]
             with lock:
-                stops[m.reason.split(" (")[0]] = stops.get(m.reason.split(" (")[0], 0) + 1
+                stops[kind] = stops.get(kind, 0) + 1
 
     def on_tf(m):
         now = rospy.Time.now()
@@ -116,7 +118,7 @@ def main():
     tips = [(0.0, 0.01, 0.12), (0.015, 0.025, 0.13)]
     rospy.sleep(a.warmup)
     with lock:  # the warm-up is not judged
-        infos.clear(), seen.clear(), latencies.clear()
+        infos.clear(), seen.clear(), latencies.clear(), shafts.clear(), stops.clear(), located.clear()
     samples = []
     start = time.time()
     k = 0

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
@@ -89,6 +90,21 @@ constexpr double kCrossingMinWidthRatio = 0.5;
 double widening(geometry::ApparentContour const& c) {
   Eigen::Vector3d const e = c.entry_px.homogeneous(), t = c.tip_px.homogeneous();
   return (c.lines[0].dot(t) + c.lines[1].dot(t)) / std::max(1e-9, c.lines[0].dot(e) + c.lines[1].dot(e));
+}
+// The strip an accepted shaft claims (processing px): between its lines widened by 2 px, from
+// 2 px before its entry to 2 px beyond its tip.
+std::vector<cv::Point> claimedStrip(geometry::ApparentContour const& c, int scale) {
+  std::vector<cv::Point> strip;
+  Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
+  for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
+    for (int k = 0; k < 2; ++k) {
+      Eigen::Vector2d const n = c.lines[k].head<2>();
+      Eigen::Vector2d const f = geometry::footOnLine(c.lines[k], e) - n * (2.0 * scale);
+      Eigen::Vector2d const ps = toProcessing(f, scale);
+      strip.emplace_back(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y())));
+    }
+  std::swap(strip[2], strip[3]);
+  return strip;
 }
 // What the stages index or divide by (the YAML loader refuses these with the key's name).
 SegmentationParams const& checked(SegmentationParams const& p) {
@@ -180,295 +196,351 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   return net_ ? detectLearned(bgr, scale) : detectColour(bgr, trocars, scale);
 }
 
-SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale) {
-  // Frames since the last detection frame: the ages of the seed memory count frames.
-  int const elapsed = since_detection_ + 1;
+// One detection frame of the colour method: the feature, the seeds, and what the seeds' searches
+// share (the result so far, the new seed memory, the crossing seeds' views).
+struct InstrumentSegmenter::FrameSearch {
+  InstrumentSegmenter& S;
+  cv::Mat const& bgr;
+  int const scale;
+  int const elapsed;  // frames since the last detection frame: the ages of the seed memory count frames
   SegmentationResult res;
-  res.scale = scale;
-  colour_.compute(small_, raw_);
-  sigmaFilter(raw_, filtered_, params_.sigma_radius, params_.sigma_delta);
-  // Trocar images in processing pixels (homogeneous: some lie at infinity).
-  std::vector<Eigen::Vector3d> t_small;
-  for (auto const& t : trocars) t_small.push_back(toProcessing(t, scale));
-  res.seeds = findSeeds(filtered_, fov_, params_.seeds, t_small);
   std::vector<Memory> memory_now;
   std::vector<std::size_t> contour_memory;  // per accepted contour: its seed's entry in memory_now
   std::vector<std::size_t> contour_region;  // ... and its region's index in res.regions
   bool all_confirmed = true;  // every shaft found was also found at the last detection (its seed's memory)
-  grower_.reset(filtered_, fov_);
   bool have_gradient = false;
-  double const max_area = params_.regions.max_area_fraction * fov_area_;
-  // The stricter checks of re-sought side pairs (see `resought` below).
-  StripSearchParams resought_contrast = params_.strip;
-  resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
-  ContourLinesParams resought_contours = params_.contours;
-  resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, params_.resought_min_entry_sine);
+  double max_area = 0.0;
+  // The stricter checks of re-sought side pairs (SeedSearch::resought).
+  StripSearchParams resought_contrast;
+  ContourLinesParams resought_contours;
   // Crossing seeds (addCrossingSeeds()): after the border's, seeds on the edge of an accepted shaft
   // that hides part of another; each is searched in the field of view less that shaft's pixels.
-  int const border_seeds = static_cast<int>(res.seeds.size());
+  int border_seeds = 0;
   std::deque<FieldOfView> occluded;  // per occluding shaft searched (stable references)
   std::vector<int> occluders;        // ... that shaft (index in res.contours)
   std::vector<int> seed_view;        // per crossing seed: its field of view in `occluded`
   std::vector<std::vector<cv::Point>> strips;  // per accepted contour: the strip it claimed (processing px)
   std::vector<int> strip_labels;               // ... and its label in grower_.labels()
-  for (int si = 0;; ++si) {
-    if (si == border_seeds && params_.crossing_seeds && !res.contours.empty())
-      addCrossingSeeds(res, strips, strip_labels, occluded, occluders, seed_view);
-    if (si >= static_cast<int>(res.seeds.size())) break;
-    if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
-    Seed const& seed = res.seeds[si];
-    bool const crossing = si >= border_seeds;
-    FieldOfView const& view = crossing ? occluded[static_cast<std::size_t>(seed_view[static_cast<std::size_t>(si - border_seeds)])] : fov_;
-    // A seed inside a region already refused for another seed (a shaft merged with a grey blob,
-    // a vessel or another instrument) would grow that region again; where it enters the view
-    // apart from that seed (not on the same stretch of the region's border), its own border run
-    // may still start a shaft's sides: that region's sides are sought from this entry (below),
-    // and its strip search runs; nothing is grown again.
-    bool const claimed = grower_.claimed(seed.position);
-    if (claimed && crossing) continue;
-    bool in_refused = false;
-    int refused_region = -1;  // the refused region it lies in
-    if (claimed && params_.strip.enabled && grower_.labels().at<std::uint8_t>(seed.position) == 255)
+
+  FrameSearch(InstrumentSegmenter& s, cv::Mat const& image, std::vector<Eigen::Vector3d> const& trocars, int sc)
+      : S(s), bgr(image), scale(sc), elapsed(s.since_detection_ + 1) {
+    res.scale = scale;
+    S.colour_.compute(S.small_, S.raw_);
+    sigmaFilter(S.raw_, S.filtered_, S.params_.sigma_radius, S.params_.sigma_delta);
+    // Trocar images in processing pixels (homogeneous: some lie at infinity).
+    std::vector<Eigen::Vector3d> t_small;
+    for (auto const& t : trocars) t_small.push_back(toProcessing(t, scale));
+    res.seeds = findSeeds(S.filtered_, S.fov_, S.params_.seeds, t_small);
+    S.grower_.reset(S.filtered_, S.fov_);
+    max_area = S.params_.regions.max_area_fraction * S.fov_area_;
+    resought_contrast = S.params_.strip;
+    resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
+    resought_contours = S.params_.contours;
+    resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, S.params_.resought_min_entry_sine);
+    border_seeds = static_cast<int>(res.seeds.size());
+  }
+  // Drops the contours `dup` (ascending) as duplicates; their seeds' memory stays a shaft's.
+  void drop(std::vector<std::size_t> const& dup) {
+    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
+      std::size_t const i = *it;
+      res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
+      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
+      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
+      contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
+      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
+    }
+  }
+  // A refused seed's run that is missing in this frame (a run near the seed threshold flickers)
+  // keeps its memory while a full or strip search of it would not be due yet: when the run is
+  // back it is not searched in full as a new seed.
+  void carryMemory() {
+    for (Memory const& m : S.memory_) {
+      if (m.accepted || (S.fullSearchDue(m, m.width, elapsed) && S.stripSearchDue(&m, m.width, elapsed))) continue;
+      bool const seen = std::any_of(memory_now.begin(), memory_now.end(),
+                                    [&](Memory const& n) { return entryDistance(n.entry, m.entry) <= S.params_.level_memory_px; });
+      if (seen) continue;
+      Memory c = m;
+      c.carried = true;
+      c.age += elapsed;
+      c.strip_age += elapsed;
+      memory_now.push_back(std::move(c));
+    }
+  }
+};
+
+// One seed's search: grow at each threshold level, score each level's straight-line pair cheaply
+// and refine the best in full until one is accepted; the strip search where every region leaked;
+// side pairs sought again where they had no edges. In a video, a seed near last frame's entry of a
+// shaft tries that shaft's level first and stops there if it scores as well as before; a seed near
+// last frame's refused region only re-grows it (to claim it) until a full search is due
+// (fullSearchDue(); its strip search: stripSearchDue()).
+struct InstrumentSegmenter::SeedSearch {
+  struct Candidate {
+    Region region;
+    SideFit sides;
+    double score;
+    int level;
+    bool resought = false;  // sides sought again (see reseek()) or from another seed's region
+  };
+  FrameSearch& F;
+  InstrumentSegmenter& S;
+  SegmentationParams const& P;
+  SegmentationResult& res;
+  int const si;
+  Seed const seed;
+  bool const crossing;
+  FieldOfView const& view;
+  bool in_refused = false;
+  int refused_region = -1;  // the refused region it lies in
+  std::vector<int> T;       // the growth levels' thresholds (growthLevels())
+  int strip_level = 0;
+  Memory const* mem = nullptr;
+  int mem_level = 0;  // last frame's level in this frame's list, which is longer on a dark border
+  std::optional<Region> best;
+  ContourFit best_fit;
+  int best_level = -1;
+  double best_score = 0.0;
+  bool best_parallel = false;
+  std::optional<StripCandidate> best_strip;
+  ContourRejection why = ContourRejection::kTooFewPoints;
+  bool strip_first = false, strip_run = false;
+  std::optional<Region> smallest;
+  int smallest_level = 0;
+  std::vector<int> tried;  // levels grown so far
+  // Candidates with a side found only as the stretch parallel to the other (fitSides(): a shaft
+  // merged with a blob near its entry) come last, after the strip search.
+  std::vector<Candidate> deferred;
+  // Re-sought candidates, refined last of all: a candidate refused for sides without edges, or
+  // for sides that diverge from the entry, has them sought again (fitSides(), SideSearch): the
+  // shaft's boundary with a grey blob (gauze) has no edge in the image, its boundary with the
+  // tissue beyond the blob has. A re-sought pair (and the region of another seed seen from this
+  // one) is less certain than a pair followed from the entry: it must be less chromatic than the
+  // tissue beside it as a strip with highlights must (matte or not: a pale tissue fold is matte),
+  // enter clearly across the border, end inside the view, and is not remembered as a parallel
+  // pair to try first next frame.
+  std::vector<Candidate> resought;
+
+  SeedSearch(FrameSearch& f, int i)
+      : F(f), S(f.S), P(f.S.params_), res(f.res), si(i), seed(f.res.seeds[static_cast<std::size_t>(i)]), crossing(i >= f.border_seeds),
+        view(crossing ? f.occluded[static_cast<std::size_t>(f.seed_view[static_cast<std::size_t>(i - f.border_seeds)])] : f.S.fov_) {}
+
+  // Whether the seed is searched: not inside a region already claimed, unless that region was
+  // refused for another seed and this seed enters the view apart from it (a shaft merged with a
+  // grey blob, a vessel or another instrument): then that region's sides are sought from this
+  // entry and its strip search runs; nothing is grown again.
+  bool due() {
+    bool const claimed = S.grower_.claimed(seed.position);
+    if (claimed && crossing) return false;
+    if (claimed && P.strip.enabled && S.grower_.labels().at<std::uint8_t>(seed.position) == 255)
       for (std::size_t ri = 0; ri < res.regions.size() && !in_refused; ++ri) {
         Region const& r = res.regions[ri];
         in_refused = res.region_status[ri] != ContourRejection::kNone && r.box.contains(seed.position) &&
                      cv::pointPolygonTest(r.boundary, seed.position, false) >= 0 &&
-                     !onOneBorderRun(r, fov_, r.seed, seed.position, params_.contours.border_margin);
+                     !onOneBorderRun(r, S.fov_, r.seed, seed.position, P.contours.border_margin);
         if (in_refused) refused_region = static_cast<int>(ri);
       }
-    if (claimed && !in_refused) continue;
-    // Grow at each threshold level; score each level's straight-line pair cheaply and refine the
-    // best ones in full until one is accepted. In a video, a seed near last frame's entry of a
-    // shaft tries that shaft's level first and stops there if it scores as well as before; a
-    // seed near last frame's rejected region only re-grows that region (to claim it) and is
-    // searched in full again every `full_search_every` frames, then less often while it keeps
-    // giving no shaft (fullSearchDue(); its strip search: stripSearchDue()).
-    // Growth levels (region_growing.h): the thresholds, lowered toward the seed's level on a dark
-    // border and followed there by the absolute ones above them (hard scene frames 0-39: the left
-    // shaft beside the gauze was grown only below its metal's level).
-    GrowthLevels const levels = growthLevels(params_.regions, seed.mean_value, seed.background);
-    std::vector<int> const& T = levels.thresholds;
-    int const strip_level = levels.strip_level;
-    Memory const* mem = remembered(seed);
-    // Last frame's level in this frame's list, which is longer on a dark border.
-    int const mem_level = mem ? rememberedLevel(T, static_cast<int>(params_.regions.thresholds.size()), mem->level, mem->threshold) : 0;
-    auto remember = [&](Memory m) {
-      m.threshold = T[m.level];
-      memory_now.push_back(std::move(m));
-    };
-    // A refused seed: its region grown again at its level and claimed, until a full search is
-    // due (fullSearchDue(): backing off while it keeps giving no shaft).
-    if (!in_refused && mem && !mem->accepted && !fullSearchDue(*mem, seed.width, elapsed)) {
-      // (a seed whose regions all leaked has none to claim)
-      std::optional<Region> r = mem->grown ? grower_.grow(seed.position, T[mem_level], si) : std::nullopt;
-      // (backed off beyond full_search_every: its region must be as it was, see fullSearchDue())
-      bool const changed = mem->age + elapsed >= params_.full_search_every && r && mem->area > 0 &&
-                           std::abs(r->area - mem->area) > params_.refused_area_change * std::max(r->area, mem->area);
-      if (!changed) {
-        if (r) {
-          res.regions.push_back(*r);
-          res.region_status.push_back(mem->why);
-          grower_.claim(*r, 255);
-        }
-        remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + elapsed, mem->strip_age + elapsed, mem->strip_fails,
-                  seed.width, std::nullopt, mem->grown});
-        memory_now.back().fails = mem->fails;
-        memory_now.back().area = mem->area;  // (the last full search's: a slow change adds up)
-        continue;
-      }
+    if (claimed && !in_refused) return false;
+    // Growth levels (region_growing.h): lowered toward the seed's level on a dark border and
+    // followed there by the absolute ones above them.
+    GrowthLevels const levels = growthLevels(P.regions, seed.mean_value, seed.background);
+    T = levels.thresholds;
+    strip_level = levels.strip_level;
+    mem = S.remembered(seed);
+    mem_level = mem ? rememberedLevel(T, static_cast<int>(P.regions.thresholds.size()), mem->level, mem->threshold) : 0;
+    return true;
+  }
+
+  void remember(Memory m) {
+    m.threshold = T[m.level];
+    F.memory_now.push_back(std::move(m));
+  }
+
+  // A refused seed: its region grown again at its level and claimed, until a full search is due
+  // (backing off while it keeps giving no shaft). True when that was all.
+  bool heldRefused() {
+    if (in_refused || !mem || mem->accepted || S.fullSearchDue(*mem, seed.width, F.elapsed)) return false;
+    // (a seed whose regions all leaked has none to claim)
+    std::optional<Region> r = mem->grown ? S.grower_.grow(seed.position, T[mem_level], si) : std::nullopt;
+    // (backed off beyond full_search_every: its region must be as it was, see fullSearchDue())
+    bool const changed = mem->age + F.elapsed >= P.full_search_every && r && mem->area > 0 &&
+                         std::abs(r->area - mem->area) > P.refused_area_change * std::max(r->area, mem->area);
+    if (changed) return false;
+    if (r) {
+      res.regions.push_back(*r);
+      res.region_status.push_back(mem->why);
+      S.grower_.claim(*r, 255);
     }
-    std::optional<Region> best;
-    ContourFit best_fit;
-    int best_level = -1;
-    double best_score = 0.0;
-    bool best_parallel = false;
-    std::optional<StripCandidate> best_strip;
-    ContourRejection why = ContourRejection::kTooFewPoints;
-    // The strip search (strip_search.h): the sides searched from the seed in the gradient.
-    auto tryStrip = [&](StripCandidate const* previous) {
-      if (!have_gradient) {
-        cv::spatialGradient(filtered_, gx_, gy_, 3);  // both 3x3 Sobel derivatives in one pass (as cv::Sobel, half the time)
-        rays_ = packRayField(gx_, gy_, fov_);          // (one load per step of the ray walks)
-        have_gradient = true;
-      }
-      ++res.strip_searches;
-      auto sc = searchStrip(filtered_, rays_, fov_, seed, strip_level, scale, params_.strip, params_.contours, previous);
-      if (!sc) return;
-      ContourFit f = refineStrip(*sc, fov_, bgr, scale, params_.strip, params_.contours);
+    remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + F.elapsed, mem->strip_age + F.elapsed, mem->strip_fails,
+              seed.width, std::nullopt, mem->grown});
+    F.memory_now.back().fails = mem->fails;
+    F.memory_now.back().area = mem->area;  // (the last full search's: a slow change adds up)
+    return true;
+  }
+
+  // The strip search (strip_search.h): the sides searched from the seed in the gradient.
+  void tryStrip(StripCandidate const* previous) {
+    if (!F.have_gradient) {
+      cv::spatialGradient(S.filtered_, S.gx_, S.gy_, 3);  // both 3x3 Sobel derivatives in one pass (as cv::Sobel, half the time)
+      S.rays_ = packRayField(S.gx_, S.gy_, S.fov_);        // (one load per step of the ray walks)
+      F.have_gradient = true;
+    }
+    ++res.strip_searches;
+    auto sc = searchStrip(S.filtered_, S.rays_, S.fov_, seed, strip_level, F.scale, P.strip, P.contours, previous);
+    if (!sc) return;
+    ContourFit f = refineStrip(*sc, S.fov_, F.bgr, F.scale, P.strip, P.contours);
+    if (f.contour) {
+      AcrossSamples const across = acrossContour(F.bgr, *f.contour, S.edgeWeight());
+      if (!stripContrastFullRes(across, P.strip)) f.rejection = ContourRejection::kLowContrast;
+      else if (mostlyGlare(across, P.contours)) f.rejection = ContourRejection::kGlare;
+      if (f.rejection != ContourRejection::kNone) f.contour.reset();
+    }
+    if (!f.contour) {
+      why = f.rejection;
+      return;
+    }
+    best = sc->region;
+    best_fit = std::move(f);
+    best_level = static_cast<int>(P.regions.thresholds.size()) - 1;  // the strip level's index
+    best_score = sc->score;
+    best_strip = std::move(sc);
+  }
+
+  // The sides of `region` sought again (its pair from the entry had no edges or diverged, or none
+  // was found in a region another seed grew): re-sought candidates. `fitted`: the region's
+  // fitSides() (its chains are reused).
+  void reseek(Region const& region, int level, SideFit const& fitted) {
+    if (P.contours.min_parallel_side_ratio <= 0.0) return;
+    for (SideFit& again : fitSidesEach(region, view, F.scale, P.contours,
+                                       {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}, &fitted)) {
+      if (again.rejection != ContourRejection::kNone) continue;
+      double const score = scoreSides(again, F.bgr, P.contours);
+      if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
+    }
+  }
+
+  // The checks of a fitted contour beyond the contour fit's: contrast, tip, glare and widening for
+  // a re-sought pair; width and continuation for a crossing shaft.
+  ContourRejection check(geometry::ApparentContour const& c, Candidate const& cd) const {
+    AcrossSamples const across = acrossContour(F.bgr, c, S.edgeWeight());
+    if (cd.resought && !stripContrastFullRes(across, F.resought_contrast)) return ContourRejection::kLowContrast;
+    if (cd.resought && depthAt(view, toProcessing(c.tip_px, F.scale)) < P.resought_min_tip_depth_px) return ContourRejection::kTipOnBorder;
+    if (mostlyGlare(across, P.contours)) return ContourRejection::kGlare;
+    if (cd.resought && widening(c) > P.resought_max_widening) return ContourRejection::kWidens;
+    if (!crossing) return ContourRejection::kNone;
+    // A crossing shaft's part beyond the occluder: where they cross the two are at about the same
+    // depth, and of the same radius, so about as wide (at least kCrossingMinWidthRatio of the
+    // occluder); and it goes on on the occluder's other side.
+    int const k = F.occluders[static_cast<std::size_t>(F.seed_view[static_cast<std::size_t>(si - F.border_seeds)])];
+    geometry::ApparentContour const& o = res.contours[static_cast<std::size_t>(k)];
+    Eigen::Vector3d const e = c.entry_px.homogeneous();
+    Eigen::Vector3d const oe = geometry::footOnLine(geometry::imageAxis(o), c.entry_px).homogeneous();
+    double const we = c.lines[0].dot(e) + c.lines[1].dot(e);
+    if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe))) return ContourRejection::kTooThin;
+    if (!continuesBeyond(c, S.grower_.labels(), F.strip_labels[static_cast<std::size_t>(k)], S.filtered_, S.fov_, T[cd.level], F.scale))
+      return ContourRejection::kNotContinued;
+    return ContourRejection::kNone;
+  }
+
+  // Refines the candidates, best score first, until one is accepted.
+  void refineCandidates(std::vector<Candidate>& cands) {
+    std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
+    for (auto& cd : cands) {
+      ContourFit f = refineContour(cd.sides, cd.region, view, F.bgr, F.scale, cd.resought ? F.resought_contours : P.contours);
       if (f.contour) {
-        AcrossSamples const across = acrossContour(bgr, *f.contour, edgeWeight());
-        if (!stripContrastFullRes(across, params_.strip)) f.rejection = ContourRejection::kLowContrast;
-        else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
+        f.rejection = check(*f.contour, cd);
         if (f.rejection != ContourRejection::kNone) f.contour.reset();
       }
-      if (!f.contour) {
-        why = f.rejection;
+      if (f.contour) {
+        best = std::move(cd.region);
+        best_fit = std::move(f);
+        best_level = cd.level;
+        best_score = cd.score;
+        best_parallel = cd.sides.parallel && !cd.resought;
         return;
       }
-      best = sc->region;
-      best_fit = std::move(f);
-      best_level = static_cast<int>(params_.regions.thresholds.size()) - 1;  // the strip level's index
-      best_score = sc->score;
-      best_strip = std::move(sc);
-    };
-    // A shaft found by the strip search in the last frame: searched about its sides first, but
-    // every full_search_every frames its regions are grown first (below) and that strip is the
-    // fallback: a shaft found as a strip once (its region leaked then) is not held as a strip
-    // for good while growth would give it its region again.
-    bool const strip_first = !crossing && mem && mem->accepted && mem->strip && params_.strip.enabled &&
-                             mem->age + elapsed < params_.full_search_every;
-    if (strip_first) tryStrip(&*mem->strip);
-    struct Candidate {
-      Region region;
-      SideFit sides;
-      double score;
-      int level;
-      bool resought = false;  // sides sought again (see refineCandidates()) or from another seed's region
-    };
-    std::optional<Region> smallest;
-    int smallest_level = 0;
-    // Grows at the given levels, scores each region's side pair, refines the best in full.
-    // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
-    std::vector<int> tried;  // levels grown so far for this seed
-    // Candidates with a side found only as the stretch parallel to the other (fitSides(): a
-    // shaft merged with a blob near its entry) come last, after the strip search.
-    std::vector<Candidate> deferred;
-    // Re-sought candidates, refined last of all: a candidate refused for sides without edges, or
-    // for sides that diverge from the entry, has them sought again (fitSides(), SideSearch): the
-    // shaft's boundary with a grey blob (gauze) has no edge in the image, its boundary with the
-    // tissue beyond the blob has; a side that ran along the blob leaves the shaft. A re-sought
-    // pair (and the region of another seed seen from this one, below) is less certain than a
-    // pair followed from the entry: it must be less chromatic than the tissue beside it as a
-    // strip with highlights must (max_full_res_ratio, matte or not: a pale tissue fold is matte),
-    // enter clearly across the border (resought_min_entry_sine), end inside the view
-    // (resought_min_tip_depth_px), and is not remembered as a parallel pair to try first next
-    // frame.
-    std::vector<Candidate> resought;
-    // The sides of `region` sought again (its pair from the entry had no edges or diverged, or
-    // none was found in a region another seed grew): re-sought candidates.
-    // `fitted`: the region's fitSides() (its chains are reused).
-    auto reseek = [&](Region const& region, int level, SideFit const& fitted) {
-      if (params_.contours.min_parallel_side_ratio <= 0.0) return;
-      for (SideFit& again : fitSidesEach(region, view, scale, params_.contours,
-                                         {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}, &fitted)) {
-        if (again.rejection != ContourRejection::kNone) continue;
-        double const score = scoreSides(again, bgr, params_.contours);
-        if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
+      why = f.rejection;
+      if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level, cd.sides);
+    }
+  }
+
+  // Grows at the given levels, scores each region's side pair, refines the best in full.
+  // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
+  void tryLevels(std::vector<int> const& levels, bool tracked) {
+    std::vector<Candidate> cands;
+    for (int li : levels) {
+      tried.push_back(li);
+      auto r = S.grower_.grow(seed.position, T[li], si);
+      if (!r) continue;
+      if (r->area > F.max_area) {
+        // Leaked into tissue: in a full search (levels ascending) higher thresholds only leak more.
+        if (!tracked) break;
+        continue;
       }
-    };
-    // Refines the candidates, best score first, until one is accepted.
-    auto refineCandidates = [&](std::vector<Candidate>& cands) {
-      std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
-      for (auto& cd : cands) {
-        ContourFit f = refineContour(cd.sides, cd.region, view, bgr, scale, cd.resought ? resought_contours : params_.contours);
-        if (f.contour) {
-          AcrossSamples const across = acrossContour(bgr, *f.contour, edgeWeight());
-          if (cd.resought && !stripContrastFullRes(across, resought_contrast)) f.rejection = ContourRejection::kLowContrast;
-          else if (cd.resought && depthAt(view, toProcessing(f.contour->tip_px, scale)) < params_.resought_min_tip_depth_px)
-            f.rejection = ContourRejection::kTipOnBorder;
-          else if (mostlyGlare(across, params_.contours)) f.rejection = ContourRejection::kGlare;
-          else if (cd.resought && widening(*f.contour) > params_.resought_max_widening) f.rejection = ContourRejection::kWidens;
-          else if (crossing) {
-            // A crossing shaft's part beyond the occluder: where they cross the two are at about
-            // the same depth, and of the same radius, so about as wide (at least
-            // kCrossingMinWidthRatio of the occluder); and it goes on on the occluder's other side.
-            int const k = occluders[static_cast<std::size_t>(seed_view[static_cast<std::size_t>(si - border_seeds)])];
-            geometry::ApparentContour const& c = *f.contour;
-            geometry::ApparentContour const& o = res.contours[static_cast<std::size_t>(k)];
-            Eigen::Vector3d const e = c.entry_px.homogeneous();
-            Eigen::Vector3d const oe = geometry::footOnLine(geometry::imageAxis(o), c.entry_px).homogeneous();
-            double const we = c.lines[0].dot(e) + c.lines[1].dot(e);
-            if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe)))
-              f.rejection = ContourRejection::kTooThin;
-            else if (!continuesBeyond(c, grower_.labels(), strip_labels[static_cast<std::size_t>(k)], filtered_, fov_, T[cd.level], scale))
-              f.rejection = ContourRejection::kNotContinued;
-          }
-          if (f.rejection != ContourRejection::kNone) f.contour.reset();
-        }
-        if (f.contour) {
-          best = std::move(cd.region);
-          best_fit = std::move(f);
-          best_level = cd.level;
-          best_score = cd.score;
-          best_parallel = cd.sides.parallel && !cd.resought;
-          return;
-        }
-        why = f.rejection;
-        if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level, cd.sides);
+      if (!smallest || r->area < smallest->area) {
+        smallest = r;
+        smallest_level = li;
       }
-    };
-    auto tryLevels = [&](std::vector<int> const& levels, bool tracked) {
-      std::vector<Candidate> cands;
-      for (int li : levels) {
-        tried.push_back(li);
-        auto r = grower_.grow(seed.position, T[li], si);
-        if (!r) continue;
-        if (r->area > max_area) {
-          // Leaked into tissue: in a full search (levels ascending) higher thresholds only leak more.
-          if (!tracked) break;
-          continue;
-        }
-        if (!smallest || r->area < smallest->area) {
-          smallest = r;
-          smallest_level = li;
-        }
-        if (r->area < params_.regions.min_area) continue;
-        SideFit sf = fitSides(*r, view, scale, params_.contours);
-        double const score = scoreSides(sf, bgr, params_.contours);
-        if (score < 0.0) {
-          why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
-          // Two straight sides from the entry that diverge: one follows a blob of the shaft's
-          // level merged with it there (grey tissue, a leak); the shaft's own side is the
-          // stretch of that chain parallel to the other (in-vivo OP1/img_24 found; OP1/img_08
-          // and img_16 found so from an earlier seed, with better lines: 2.31 -> 2.15 px).
-          if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li, sf);
-          continue;
-        }
-        // (not deferred for a shaft that was found so in the last frame: its level is tried first)
-        bool const defer = sf.parallel && !(tracked && mem->parallel);
-        // (a crossing seed's pair is checked as a re-sought one: it enters the view at another
-        // shaft, not at the border)
-        (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li, crossing});
-        if (!defer && tracked && li == mem_level && score >= 0.85 * mem->score) break;  // as good as before
+      if (r->area < P.regions.min_area) continue;
+      SideFit sf = fitSides(*r, view, F.scale, P.contours);
+      double const score = scoreSides(sf, F.bgr, P.contours);
+      if (score < 0.0) {
+        why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
+        // Two straight sides from the entry that diverge: one follows a blob of the shaft's level
+        // merged with it there (grey tissue, a leak); the shaft's own side is the stretch of that
+        // chain parallel to the other.
+        if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li, sf);
+        continue;
       }
+      // (not deferred for a shaft that was found so in the last frame: its level is tried first)
+      bool const defer = sf.parallel && !(tracked && mem->parallel);
+      // (a crossing seed's pair is checked as a re-sought one: it enters the view at another
+      // shaft, not at the border)
+      (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li, crossing});
+      if (!defer && tracked && li == mem_level && score >= 0.85 * mem->score) break;  // as good as before
+    }
+    refineCandidates(cands);
+  }
+
+  // The refused region seen from this seed's border run: its two sides split at this entry, not
+  // at the other seed's (a shaft merged with a blob that entered the view elsewhere and was
+  // searched first: gauze reaching another border). A re-sought candidate; without a pair with
+  // edges from this entry, its sides are sought again.
+  void searchRefusedRegion() {
+    Region r = res.regions[static_cast<std::size_t>(refused_region)];
+    r.seed = seed.position;
+    r.seed_index = si;
+    if (r.area < P.regions.min_area) return;
+    SideFit sf = fitSides(r, S.fov_, F.scale, P.contours);
+    double const score = scoreSides(sf, F.bgr, P.contours);
+    int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()), static_cast<int>(T.size()) - 1);
+    if (score < 0.0 && !sf.parallel) reseek(r, level, sf);  // no pair with edges from this entry
+    if (score < 0.0) return;
+    Candidate cd{std::move(r), std::move(sf), score, level, true};
+    if (cd.sides.parallel) {
+      deferred.push_back(std::move(cd));
+    } else {
+      std::vector<Candidate> cands{std::move(cd)};
       refineCandidates(cands);
-    };
+    }
+  }
+
+  void search() {
+    // A shaft found by the strip search in the last frame: searched about its sides first, but
+    // every full_search_every frames its regions are grown first and that strip is the fallback
+    // (a shaft found as a strip once is not held as a strip for good).
+    strip_first = !crossing && mem && mem->accepted && mem->strip && P.strip.enabled && mem->age + F.elapsed < P.full_search_every;
+    if (strip_first) tryStrip(&*mem->strip);
     std::vector<int> all(T.size());
     std::iota(all.begin(), all.end(), 0);
     if (in_refused) {
       ++res.full_searches;
-      // The refused region seen from this seed's border run: its two sides are split at this
-      // entry, not at the other seed's (a shaft merged with a blob that entered the view
-      // elsewhere and was searched first: gauze reaching another border). A re-sought candidate;
-      // without a pair with edges from this entry, its sides are sought again (hard scene 95.7 ->
-      // 97.1 % found: the gauze on both sides of the shaft at its entry).
-      Region r = res.regions[static_cast<std::size_t>(refused_region)];
-      r.seed = seed.position;
-      r.seed_index = si;
-      if (r.area >= params_.regions.min_area) {
-        SideFit sf = fitSides(r, fov_, scale, params_.contours);
-        double const score = scoreSides(sf, bgr, params_.contours);
-        int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()),
-                                   static_cast<int>(T.size()) - 1);
-        if (score < 0.0 && !sf.parallel) reseek(r, level, sf);  // no pair with edges from this entry
-        if (score >= 0.0) {
-          Candidate cd{std::move(r), std::move(sf), score, level, true};
-          if (cd.sides.parallel) {
-            deferred.push_back(std::move(cd));
-          } else {
-            std::vector<Candidate> cands{std::move(cd)};
-            refineCandidates(cands);
-          }
-        }
-      }
-      // (then the strip search, below)
+      searchRefusedRegion();  // (then the strip search, below)
     } else if (!best && mem && mem->accepted) {
       std::vector<int> near;
       for (int d : {0, -1, 1})
         if (mem_level + d >= 0 && mem_level + d < static_cast<int>(T.size())) near.push_back(mem_level + d);
       tryLevels(near, true);
-      // Lost about last frame's level: the full search now, not `full_search_every` frames later,
-      // over the levels not grown yet (those gave regions that were refused or leaked).
+      // Lost about last frame's level: the full search now, over the levels not grown yet.
       if (!best) {
         ++res.full_searches;
         std::vector<int> rest;
@@ -480,15 +552,11 @@ SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::ve
       ++res.full_searches;
       tryLevels(all, false);
     }
-    // The region leaked or split at every level: search the shaft's sides from the seed directly
-    // in the feature's gradient (strip_search.h), once per seed. Not for a seed that is one only
-    // under the relaxed threshold of the arc facing a trocar image (its mean above the seed
-    // threshold): its regions are grown, but the strip search, the costliest step (about as much
-    // as the rest of a frame), found no shaft from such a seed in any evaluation, and on the
-    // benchmark's scene such seeds in the dark tissue where the left shaft enters took 14 % of
-    // the pipeline's time.
-    bool const strip_run = !best && !crossing && params_.strip.enabled && seed.mean_value <= params_.seeds.threshold &&
-                           stripSearchDue(mem, seed.width, elapsed);
+    // The region leaked or split at every level: the shaft's sides searched from the seed in the
+    // feature's gradient, once per seed. Not for a seed that is one only under the relaxed
+    // threshold facing a trocar image: the strip search, the costliest step, found no shaft from
+    // such a seed in any evaluation.
+    strip_run = !best && !crossing && P.strip.enabled && seed.mean_value <= P.seeds.threshold && S.stripSearchDue(mem, seed.width, F.elapsed);
     if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
     if (!best && !deferred.empty()) refineCandidates(deferred);
     while (!best && !resought.empty()) {  // (a re-sought pair is a parallel one: it re-seeks nothing)
@@ -496,11 +564,15 @@ SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::ve
       resought.clear();
       refineCandidates(last);
     }
+  }
+
+  // The seed's memory, and the shaft found (claimed, reported) or the region refused (claimed).
+  void conclude() {
     if (best) {
       // (a strip followed from the last frame's had no full search: its age goes on)
-      int const age = strip_first && best_strip ? mem->age + elapsed : 0;
+      int const age = strip_first && best_strip ? mem->age + F.elapsed : 0;
       remember({seed.position, best_level, best_score, true, ContourRejection::kNone, age, 0, 0, seed.width, best_strip});
-      memory_now.back().parallel = best_parallel;
+      F.memory_now.back().parallel = best_parallel;
     }
     // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
     // border run): the region is claimed, not reported. Its memory stays that of a shaft, so that
@@ -513,90 +585,66 @@ SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::ve
     if (!best && why != ContourRejection::kDuplicate) {
       int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
       // (a seed that only had its strip searched has had no full search: due at once next time)
-      remember({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? params_.full_search_every : 0,
-                strip_run ? 0 : age + elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
-      memory_now.back().fails = mem && !mem->accepted && !in_refused ? mem->fails + 1 : 1;
-      memory_now.back().area = smallest ? smallest->area : 0;
+      remember({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? P.full_search_every : 0,
+                strip_run ? 0 : age + F.elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
+      F.memory_now.back().fails = mem && !mem->accepted && !in_refused ? mem->fails + 1 : 1;
+      F.memory_now.back().area = smallest ? smallest->area : 0;
     }
     Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
-    if (!keep) continue;
+    if (!keep) return;
     res.regions.push_back(*keep);
     res.region_status.push_back(best ? ContourRejection::kNone : why);
     // Claimed either way, so the other seeds of this blob are skipped; an accepted shaft claims
     // only its strip (widened by 2 px), so a touching instrument's seed still grows.
-    std::vector<cv::Point> strip;
-    if (best) {
-      geometry::ApparentContour const& c = *best_fit.contour;
-      Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
-      for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
-        for (int k = 0; k < 2; ++k) {
-          Eigen::Vector2d const n = c.lines[k].head<2>();
-          Eigen::Vector2d const f = geometry::footOnLine(c.lines[k], e) - n * (2.0 * scale);
-          Eigen::Vector2d const ps = toProcessing(f, scale);
-          strip.emplace_back(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y())));
-        }
-      std::swap(strip[2], strip[3]);
-    }
-    grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
-    if (best) {
-      strips.push_back(strip);
-      strip_labels.push_back(static_cast<int>(res.regions.size()));
-      geometry::ApparentContour c = *best_fit.contour;
-      // Reported on the image axis (the lines' bisector): the seed, the middle of the shaft's
-      // border run, is off the axis where the shaft crosses the border obliquely, at a corner or
-      // with its shadow, and the farthest region point can be a jaw's corner. (Only the report:
-      // the claim above and the checks keep the region's points.)
-      geometry::ImageLine const ax = geometry::imageAxis(c);
-      c.entry_px = geometry::footOnLine(ax, c.entry_px);
-      c.tip_px = geometry::footOnLine(ax, c.tip_px);
-      c.insertion_point_id = seed.insertion_point;
-      res.contours.push_back(c);
-      contour_memory.push_back(memory_now.size() - 1);  // this seed's memory (pushed above)
-      contour_region.push_back(res.regions.size() - 1);  // its region (pushed above)
-      all_confirmed = all_confirmed && mem && mem->accepted;
-      res.edges.push_back(best_fit.edges);
-    }
+    std::vector<cv::Point> const strip = best ? claimedStrip(*best_fit.contour, F.scale) : std::vector<cv::Point>{};
+    S.grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
+    if (best) report(strip);
   }
-  // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is
-  // a duplicate as in the other order (in-vivo OP1/img_16 and OP2/img_03 were reported twice).
-  // Its seed's memory stays a shaft's, as for a duplicate refused above.
-  auto drop = [&](std::vector<std::size_t> const& dup) {
-    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
-      std::size_t const i = *it;
-      res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
-      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
-      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
-      contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
-      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
-    }
-  };
-  drop(narrowerDuplicates(res.contours));
-  // Then contours that overlap one that fits better: a wedge between a shaft's edge and a
-  // tissue edge, found as a strip from a seed beside that shaft (not parallel to it). Its seed's
-  // memory stays a shaft's too (its strip is tried first next frame, and dropped again).
-  drop(overlappingDuplicates(res.contours));
+
+  void report(std::vector<cv::Point> const& strip) {
+    F.strips.push_back(strip);
+    F.strip_labels.push_back(static_cast<int>(res.regions.size()));
+    geometry::ApparentContour c = *best_fit.contour;
+    // Reported on the image axis (the lines' bisector): the seed, the middle of the shaft's border
+    // run, is off the axis where the shaft crosses the border obliquely, and the farthest region
+    // point can be a jaw's corner. (Only the report: the claim and the checks keep the region's.)
+    geometry::ImageLine const ax = geometry::imageAxis(c);
+    c.entry_px = geometry::footOnLine(ax, c.entry_px);
+    c.tip_px = geometry::footOnLine(ax, c.tip_px);
+    c.insertion_point_id = seed.insertion_point;
+    res.contours.push_back(c);
+    F.contour_memory.push_back(F.memory_now.size() - 1);  // this seed's memory (pushed by conclude())
+    F.contour_region.push_back(res.regions.size() - 1);   // its region (pushed by conclude())
+    F.all_confirmed = F.all_confirmed && mem && mem->accepted;
+    res.edges.push_back(best_fit.edges);
+  }
+};
+
+SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale) {
+  FrameSearch F(*this, bgr, trocars, scale);
+  for (int si = 0;; ++si) {
+    if (si == F.border_seeds && params_.crossing_seeds && !F.res.contours.empty())
+      addCrossingSeeds(F.res, F.strips, F.strip_labels, F.occluded, F.occluders, F.seed_view);
+    if (si >= static_cast<int>(F.res.seeds.size())) break;
+    if (static_cast<int>(F.res.contours.size()) >= params_.regions.max_regions) break;
+    SeedSearch s(F, si);
+    if (!s.due() || s.heldRefused()) continue;
+    s.search();
+    s.conclude();
+  }
+  // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is a
+  // duplicate as in the other order. Then contours that overlap one that fits better: a wedge
+  // between a shaft's edge and a tissue edge, found as a strip from a seed beside that shaft.
+  F.drop(narrowerDuplicates(F.res.contours));
+  F.drop(overlappingDuplicates(F.res.contours));
   labels_ = grower_.labels();
-  // A refused seed's run that is missing in this frame (a run near the seed threshold flickers:
-  // robotic Dataset 1, about one seed per frame) keeps its memory while a full or strip search
-  // of it would not be due yet: when the run is back it is not searched in full as a new seed.
-  for (Memory const& m : memory_) {
-    if (m.accepted || (fullSearchDue(m, m.width, elapsed) && stripSearchDue(&m, m.width, elapsed))) continue;
-    bool const seen = std::any_of(memory_now.begin(), memory_now.end(),
-                                  [&](Memory const& n) { return entryDistance(n.entry, m.entry) <= params_.level_memory_px; });
-    if (seen) continue;
-    Memory c = m;
-    c.carried = true;
-    c.age += elapsed;
-    c.strip_age += elapsed;
-    memory_now.push_back(std::move(c));
-  }
-  memory_ = std::move(memory_now);
+  F.carryMemory();
+  memory_ = std::move(F.memory_now);
   // Only shafts confirmed by two detections in a row are tracked: a new one (or a tissue band
-  // found in some frames only) makes the next frame a detection frame too, so that a false
-  // shaft is not held for detect_every frames (robotic Dataset 2 with detect_every 4: 0.20 ->
-  // 0.07 false per frame, as when detecting every frame; it costs ~15 % more detection frames).
-  startTracks(res, all_confirmed, bgr, contour_memory);
-  return res;
+  // found in some frames only) makes the next frame a detection frame too, so that a false shaft
+  // is not held for detect_every frames.
+  startTracks(F.res, F.all_confirmed, bgr, F.contour_memory);
+  return std::move(F.res);
 }
 
 void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr,

@@ -156,6 +156,8 @@ class InstrumentSegmenter {
                         std::vector<int>& seed_view) const;
   std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
   void updateFieldOfView();  // on small_, every fov_refresh frames or when its size changes
+  struct FrameSearch;  // one detection frame of the colour method, over its seeds (segmentation.cpp)
+  struct SeedSearch;   // ... and one seed's search
   // One detection frame (small_ and fov_ set): the colour method's, or the learned detector's.
   SegmentationResult detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale);
   SegmentationResult detectLearned(cv::Mat const& bgr, int scale);
