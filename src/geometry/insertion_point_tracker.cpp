@@ -32,6 +32,7 @@ void InsertionPointTracker::reset() {
   initialized_ = false;
   clearSums();
   rejected_ = 0;
+  held_ = false;
   estimate_ = InsertionPointEstimate{};
 }
 
@@ -228,6 +229,7 @@ bool InsertionPointTracker::initialiseFrom(std::vector<AxisObservation> const& o
   for (auto const& o : obs) axes.push_back(o.axis);
   InsertionPointEstimate const e = intersectAxesRobust(axes, options_.robust);  // Eq. (3), LMedS
   if (!e.ok() || e.inliers.size() < 2) return false;
+  held_ = false;
   origin_ = e.position;
   Eigen::Vector3d at = e.position;
   for (int it = 0; it < std::max(1, options_.reweight_iterations); ++it) {
@@ -269,9 +271,32 @@ InsertionPointTracker::Update InsertionPointTracker::update(PluckerLine const& a
                                                                                        : Update::kRejected;
   }
   consecutive_rejects_ = 0;
+  // Exponential forgetting without new angular information winds the estimate up: an instrument
+  // held still replaces the diverse views that fixed its trocar by copies of one, the spread
+  // shrinks and the point would stop being located although every axis passes through it. Such
+  // an axis is consistent with the point and adds nothing to it: the point is held. (A point
+  // that loses its location as the spread grows, or by its axes' scatter, is not held.)
+  bool const was_located = located();
+  State const before = was_located ? state() : State{};
   accumulate({axis, cov, stamp}, estimate_.position);
   solve();
+  held_ = was_located && !located() && !(estimate_.conditioning > before.estimate.conditioning);
+  if (held_) {
+    restore(before);
+    return Update::kHeld;
+  }
   return Update::kAccepted;
+}
+
+InsertionPointTracker::State InsertionPointTracker::state() const {
+  return {Bw_, Bu_, open_M_, blocks_T_, blocks_w_, blocks_w2_, sw_, sw2_, span_, last_stamp_, open_n_, accepted_, estimate_};
+}
+
+void InsertionPointTracker::restore(State const& s) {
+  Bw_ = s.Bw, Bu_ = s.Bu, open_M_ = s.open_M, blocks_T_ = s.blocks_T;
+  blocks_w_ = s.blocks_w, blocks_w2_ = s.blocks_w2, sw_ = s.sw, sw2_ = s.sw2, span_ = s.span, last_stamp_ = s.last_stamp;
+  open_n_ = s.open_n, accepted_ = s.accepted;
+  estimate_ = s.estimate;
 }
 
 // --------------------------------------------------------------------------------------------

@@ -293,6 +293,46 @@ TEST(InsertionPointTracker, LocatedOnlyOnceThePositionIsKnown) {
   EXPECT_LT((t.estimate().position - kTrocar).norm(), t.options().max_sigma);
 }
 
+// An instrument held still after its trocar was located: thousands of copies of one noisy axis
+// (eight memory constants, 67 s at 60 Hz) would forget the diverse views that fixed the point,
+// its spread would shrink and it would stop being located, and a servo pivoting about it would
+// stop for good. Each still axis passes through the point, so it is held where it was; moving
+// the instrument again goes on accumulating; a trocar that moves is still found again.
+TEST(InsertionPointTracker, AStillInstrumentKeepsItsTrocarLocated) {
+  std::mt19937_64 rng(33);
+  std::normal_distribution<double> N(0.0, 0.0005);
+  InsertionPointTracker t;
+  for (auto const& a : axesThrough(kTrocar, 400, rng, 0.06)) t.update(a);
+  ASSERT_TRUE(t.located());
+  Eigen::Vector3d const before = t.estimate().position;
+  PluckerLine const still = axesThrough(kTrocar, 1, rng, 0.06)[0];
+  Eigen::Vector3d const e1 = still.direction().unitOrthogonal(), e2 = still.direction().cross(e1);
+  int held = 0;
+  for (int k = 0; k < 4000; ++k) {
+    auto const a = *PluckerLine::fromPointDirection(kTrocar + N(rng) * e1 + N(rng) * e2, still.direction());
+    held += t.update(a) == InsertionPointTracker::Update::kHeld;
+  }
+  std::printf("[ still instrument ] %d of 4000 axes held; spread %.1f deg; moved %.3f mm\n", held,
+              std::asin(t.estimate().conditioning) * 180 / M_PI, 1e3 * (t.estimate().position - before).norm());
+  EXPECT_TRUE(t.located());
+  EXPECT_TRUE(t.held());
+  EXPECT_GT(held, 500);
+  EXPECT_LT((t.estimate().position - kTrocar).norm(), 1e-3);
+  // The same stream on a point never located is not held: an ill-conditioned point stays so.
+  InsertionPointTracker u;
+  for (int k = 0; k < 300; ++k) u.update(*PluckerLine::fromPointDirection(kTrocar + N(rng) * e1 + N(rng) * e2, still.direction()));
+  EXPECT_FALSE(u.located());
+  EXPECT_FALSE(u.held());
+  // Moving again: accumulated, not held.
+  for (auto const& a : axesThrough(kTrocar, 200, rng, 0.06)) t.update(a);
+  EXPECT_TRUE(t.located());
+  EXPECT_FALSE(t.held());
+  // The trocar re-ported 3 cm away: the axes leave the gate and the point is found there.
+  Eigen::Vector3d const moved = kTrocar + Eigen::Vector3d(0.0, 0.03, 0.0);
+  for (auto const& a : axesThrough(moved, 400, rng, 0.06)) t.update(a);
+  EXPECT_LT((t.estimate().position - moved).norm(), 1e-3);
+}
+
 // Precise axes of a breathing trocar (2 mm, a 4 s cycle) seen over a fan that widens slowly: the
 // trocar's motion across the axes is shared by every axis of a breathing cycle, and moves the
 // point along the narrow fan by that motion over the fan's spread. A point must not be located

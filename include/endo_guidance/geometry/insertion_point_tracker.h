@@ -87,7 +87,10 @@ struct InsertionPointTrackerOptions {
 /// rejections re-initialises the estimate robustly (LMedS, Eq. (3)) from the most recent axes.
 class InsertionPointTracker {
  public:
-  enum class Update { kBuffered, kAccepted, kRejected, kReinitialised, kFrozen, kInvalid };
+  /// kHeld: the axis passes through the located point but would narrow the axes' angular spread
+  /// until the point is no longer located (an instrument held still): not accumulated, the point
+  /// held where the earlier, diverse views put it.
+  enum class Update { kBuffered, kAccepted, kRejected, kReinitialised, kFrozen, kInvalid, kHeld };
 
   explicit InsertionPointTracker(InsertionPointTrackerOptions const& options = {});
 
@@ -116,6 +119,8 @@ class InsertionPointTracker {
   /// position itself can be relied on (a frame to pivot an instrument about). Along the mean
   /// axis the position is fixed only as the axes' spread grows; meanwhile it is not located.
   bool located() const;
+  /// True while the last consistent axes were held (Update::kHeld) rather than accumulated.
+  bool held() const { return held_; }
 
   void reset();
   void setFrozen(bool frozen) { frozen_ = frozen; }
@@ -132,12 +137,22 @@ class InsertionPointTracker {
   void solve();
   Eigen::Matrix3d clusterCovariance(Eigen::Matrix3d const& Sinv, Eigen::Vector4d const& xt, double* blocks) const;
   bool initialiseFrom(std::vector<AxisObservation> const& obs);
+  /// The recursive sums and the estimate, kept to undo an update that is held.
+  struct State {
+    Eigen::Matrix4d Bw, Bu, open_M;
+    Eigen::Matrix<double, 12, 12> blocks_T;
+    double blocks_w, blocks_w2, sw, sw2, span, last_stamp;
+    std::size_t open_n, accepted;
+    InsertionPointEstimate estimate;
+  };
+  State state() const;
+  void restore(State const& s);
 
   InsertionPointTrackerOptions options_;
   double rho_;
   std::deque<AxisObservation> window_;
   bool initialized_ = false;
-  bool frozen_ = false;
+  bool frozen_ = false, held_ = false;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   Eigen::Matrix4d Bw_ = Eigen::Matrix4d::Zero();  ///< weighted normal matrix (relative to origin_)
   Eigen::Matrix4d Bu_ = Eigen::Matrix4d::Zero();  ///< unweighted
