@@ -2,6 +2,9 @@
 #include "endo_guidance/perception/rectification.h"
 
 #include <cmath>
+#include <memory>
+#include <opencv2/calib3d.hpp>
+#include <vector>
 
 #include "endo_guidance/perception/line_fit.h"
 
@@ -9,7 +12,7 @@ namespace endo_guidance::perception {
 
 std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContour const& contour,
                                               std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
-                                              std::function<Eigen::Vector2d(Eigen::Vector2d const&)> const& rectify,
+                                              PointRectifier const& rectify,
                                               int min_points, double sigma_floor_px) {
   geometry::ApparentContour out = contour;
   out.entry_px = rectify(contour.entry_px);
@@ -40,6 +43,34 @@ std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContou
   Eigen::Vector3d const in(inside.x(), inside.y(), 1.0);
   if (!(out.lines[0].dot(in) > 0.0 && out.lines[1].dot(in) > 0.0)) return std::nullopt;
   return out;
+}
+
+
+PointRectifier pointRectifier(cv::Matx33d const& K, cv::Mat const& D, cv::Matx33d const& R, cv::Matx33d const& P, cv::Size size) {
+  cv::TermCriteria const crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-10);
+  cv::Mat const Dc = D.clone();
+  auto exact = [K, R, P, Dc, crit](Eigen::Vector2d const& p) {
+    std::vector<cv::Point2d> in{{p.x(), p.y()}}, out;
+    cv::undistortPoints(in, out, K, Dc, R, P, crit);
+    return Eigen::Vector2d(out[0].x, out[0].y);
+  };
+  int const W = size.width, H = size.height;
+  std::vector<cv::Point2d> grid;
+  grid.reserve(static_cast<std::size_t>(W) * H);
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) grid.emplace_back(u, v);
+  auto table = std::make_shared<std::vector<cv::Point2d>>();
+  if (!grid.empty()) cv::undistortPoints(grid, *table, K, Dc, R, P, crit);
+  return [table, W, H, exact](Eigen::Vector2d const& p) {
+    if (!(p.x() >= 0.0 && p.y() >= 0.0 && p.x() < W - 1 && p.y() < H - 1)) return exact(p);
+    int const u = static_cast<int>(p.x()), v = static_cast<int>(p.y());
+    double const fx = p.x() - u, fy = p.y() - v;
+    auto at = [&](int du, int dv) {
+      cv::Point2d const& q = (*table)[static_cast<std::size_t>(v + dv) * W + (u + du)];
+      return Eigen::Vector2d(q.x, q.y);
+    };
+    return Eigen::Vector2d((1 - fy) * ((1 - fx) * at(0, 0) + fx * at(1, 0)) + fy * ((1 - fx) * at(0, 1) + fx * at(1, 1)));
+  };
 }
 
 }  // namespace endo_guidance::perception

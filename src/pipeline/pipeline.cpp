@@ -61,9 +61,9 @@ int attachAxis(geometry::InsertionPointSet& set, geometry::CylinderPose const& p
   return id;
 }
 
-Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params)
+Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params, perception::PointRectifier rectify)
     : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
-      points_(outOfViewOptions(params.insertion_points, K, size)), tracker_(params.tracking) {}
+      points_(outOfViewOptions(params.insertion_points, K, size)), tracker_(params.tracking), rectify_(std::move(rectify)) {}
 
 void Pipeline::reset() {
   segmenter_.reset();
@@ -88,8 +88,20 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr, double stamp) {
   wellConditionedImages(points_, K_, &trocar_images);
   bool const established = !trocar_images.empty();
   out.segmentation = segmenter_.process(bgr, trocar_images);
-  tracker_.assign(out.segmentation.contours);
-  for (geometry::ApparentContour const& c : out.segmentation.contours) {
+  // The segmentation's contours are in the image's pixels (its overlay is drawn on the image);
+  // with lens distortion, the poses take them refitted in rectified pixels.
+  std::vector<geometry::ApparentContour>* contours = &out.segmentation.contours;
+  std::vector<geometry::ApparentContour> rectified;
+  if (rectify_) {
+    perception::ContourLinesParams const& cp = params_.segmentation.contours;
+    for (std::size_t i = 0; i < out.segmentation.contours.size(); ++i)
+      if (auto r = perception::rectifyContour(out.segmentation.contours[i], out.segmentation.edges[i], rectify_, cp.min_edge_points,
+                                              cp.line_sigma_floor_px))
+        rectified.push_back(*r);
+    contours = &rectified;
+  }
+  tracker_.assign(*contours);
+  for (geometry::ApparentContour const& c : *contours) {
     geometry::CylinderPoseResult const r = geometry::estimateCylinderPose(K_, params_.radius, c, params_.pose);
     if (!r.ok()) {
       ++out.rejected_pose;

@@ -10,6 +10,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "endo_guidance/io/yaml_config.h"
+#include "endo_guidance/perception/rectification.h"
 
 namespace endo_guidance::ros_io {
 
@@ -80,42 +81,14 @@ bool sameCameraScale(sensor_msgs::CameraInfo const& a, sensor_msgs::CameraInfo c
 }
 
 std::function<Eigen::Vector2d(Eigen::Vector2d const&)> rectifier(sensor_msgs::CameraInfo const& info) {
-  // image_geometry holds the camera model (K, D, R, P with its defaults for unset R and P); the
-  // iteration count is ours: OpenCV's default 5 leave 0.02 px at a wide-angle endoscope's corners.
+  // image_geometry holds the camera model (K, D, R, P with its defaults for unset R and P).
   image_geometry::PinholeCameraModel model;
   model.fromCameraInfo(info);
-  cv::Matx33d const K = model.intrinsicMatrix();
-  cv::Matx33d const R = model.rotationMatrix();
   cv::Matx34d const P = model.projectionMatrix();
   cv::Matx33d Pr(P(0, 0), P(0, 1), P(0, 2), P(1, 0), P(1, 1), P(1, 2), P(2, 0), P(2, 1), P(2, 2));
-  if (!(Pr(0, 0) > 0.0 && Pr(1, 1) > 0.0)) Pr = K;  // P unset: the rectified camera keeps K (as rectifiedK())
-  cv::Mat const D = model.distortionCoeffs().clone();
-  cv::TermCriteria const crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-10);
-  auto exact = [K, R, Pr, D, crit](Eigen::Vector2d const& p) {
-    std::vector<cv::Point2d> in{{p.x(), p.y()}}, out;
-    cv::undistortPoints(in, out, K, D, R, Pr, crit);
-    return Eigen::Vector2d(out[0].x, out[0].y);
-  };
-  // The mapping is smooth: tabulated once per camera model at every pixel (one batched call),
-  // then interpolated bilinearly per edge point (well under 1e-3 px), instead of one OpenCV
-  // call per point on every frame. Points outside the image take the exact call.
-  int const W = static_cast<int>(info.width), H = static_cast<int>(info.height);
-  std::vector<cv::Point2d> grid;
-  grid.reserve(static_cast<std::size_t>(W) * H);
-  for (int v = 0; v < H; ++v)
-    for (int u = 0; u < W; ++u) grid.emplace_back(u, v);
-  auto table = std::make_shared<std::vector<cv::Point2d>>();
-  cv::undistortPoints(grid, *table, K, D, R, Pr, crit);
-  return [table, W, H, exact](Eigen::Vector2d const& p) {
-    if (!(p.x() >= 0.0 && p.y() >= 0.0 && p.x() < W - 1 && p.y() < H - 1)) return exact(p);
-    int const u = static_cast<int>(p.x()), v = static_cast<int>(p.y());
-    double const fx = p.x() - u, fy = p.y() - v;
-    auto at = [&](int du, int dv) {
-      cv::Point2d const& q = (*table)[static_cast<std::size_t>(v + dv) * W + (u + du)];
-      return Eigen::Vector2d(q.x, q.y);
-    };
-    return Eigen::Vector2d((1 - fy) * ((1 - fx) * at(0, 0) + fx * at(1, 0)) + fy * ((1 - fx) * at(0, 1) + fx * at(1, 1)));
-  };
+  if (!(Pr(0, 0) > 0.0 && Pr(1, 1) > 0.0)) Pr = model.intrinsicMatrix();  // P unset: the rectified camera keeps K (as rectifiedK())
+  return perception::pointRectifier(model.intrinsicMatrix(), model.distortionCoeffs(), model.rotationMatrix(), Pr,
+                                    cv::Size(static_cast<int>(info.width), static_cast<int>(info.height)));
 }
 
 bool toMsg(geometry::ApparentContour const& c, endo_guidance::ApparentContour& m) {

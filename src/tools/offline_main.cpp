@@ -55,7 +55,7 @@ void usage(std::FILE* f) {
                "  INPUT: image files, a directory of images (sorted by name), a video file, or a bag\n"
                "         (--image-topic; its camera_info is used when present).\n"
                "  CAMERA.yaml: ROS camera_info YAML (camera_calibration_parsers format); distorted\n"
-               "         images are rectified first and the contours are given in rectified pixels.\n"
+               "         images are segmented as they are and the contours given in rectified pixels.\n"
                "  --output: one JSON object per frame (default: standard output).\n"
                "  --overlay: a directory (one PNG per frame) or a video file (.avi/.mp4/.mkv).\n"
                "  --fps: time stamps of image files, and of a video without a frame rate (default 25).\n"
@@ -288,19 +288,17 @@ int main(int argc, char** argv) {
     if (!cam && camera_path.empty()) throw std::runtime_error("--camera CAMERA.yaml is required (no camera_info in the input)");
     if (!camera_path.empty() && !cam) cam = io::loadCameraYaml(camera_path);
 
-    cv::Mat map1, map2;
+    // Lens distortion: the images are segmented as they are, and each contour refitted to its
+    // rectified edge points (as the Segmentation nodelet does); poses and output in the rectified camera.
     Eigen::Matrix3d const K = cam->rectifiedK();
+    PointRectifier rectify;
     if (cam->hasDistortion()) {
-      cv::Mat Kc(3, 3, CV_64F), Kn(3, 3, CV_64F), D(1, static_cast<int>(cam->D.size()), CV_64F);
+      cv::Matx33d Kc, Kn;
       for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) {
-          Kc.at<double>(r, c) = cam->K(r, c);
-          Kn.at<double>(r, c) = K(r, c);
-        }
-      for (std::size_t q = 0; q < cam->D.size(); ++q) D.at<double>(0, static_cast<int>(q)) = cam->D[q];
-      cv::initUndistortRectifyMap(Kc, D, cv::Mat(), Kn, cv::Size(cam->width, cam->height), CV_16SC2, map1, map2);
+        for (int c = 0; c < 3; ++c) Kc(r, c) = cam->K(r, c), Kn(r, c) = K(r, c);
+      rectify = pointRectifier(Kc, cv::Mat(cam->D, true).reshape(1, 1), cv::Matx33d::eye(), Kn, cv::Size(cam->width, cam->height));
     }
-    Pipeline pipe(K, cv::Size(cam->width, cam->height), params);
+    Pipeline pipe(K, cv::Size(cam->width, cam->height), params, rectify);
 
     std::ofstream file, report_file;
     std::ostream* js = &std::cout;
@@ -334,8 +332,7 @@ int main(int argc, char** argv) {
         if (!f.error.empty()) {
           out.error = f.error;
         } else {
-          cv::Mat img = f.image;
-          if (!map1.empty() && img.size() == cv::Size(cam->width, cam->height)) cv::remap(f.image, img, map1, map2, cv::INTER_LINEAR);
+          cv::Mat const& img = f.image;
           if (independent) pipe.reset();
           out = pipe.process(img, f.stamp);
           if (out.error.empty()) last = out;

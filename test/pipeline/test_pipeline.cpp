@@ -5,6 +5,9 @@
 #include <map>
 #include <set>
 
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/sim/scene_renderer.h"
 
@@ -67,6 +70,53 @@ TEST(Pipeline, TrocarsFromRenderedVideoAndNoGauze) {
 // reset(): after a video (insertion points found, seed levels and tracks remembered) the next
 // frame is processed exactly as by a new Pipeline, and no insertion point is left; without it the
 // same frame comes out otherwise (the seed search focused by the trocars, attachments, track ids).
+// A distorted lens (plumb_bob): the frames are segmented as they are and each contour refitted to
+// its rectified edge points (pointRectifier()); the contours are then the straight lines of the
+// rectified camera, which the same frames without the rectifier miss.
+TEST(Pipeline, DistortedFramesGiveRectifiedContours) {
+  SyntheticSceneOptions so;
+  SyntheticScene scene(defaultInstruments(), so);
+  SceneRenderer renderer(so.width, so.height, RenderOptions{});
+  cv::Matx33d const K(so.K(0, 0), 0, so.K(0, 2), 0, so.K(1, 1), so.K(1, 2), 0, 0, 1);
+  std::vector<double> const D{-0.2, 0.05, 0.0, 0.0, 0.0};
+  std::vector<cv::Point2f> grid, ideal;  // for each distorted pixel, where it comes from in the ideal image
+  for (int v = 0; v < so.height; ++v)
+    for (int u = 0; u < so.width; ++u) grid.emplace_back(static_cast<float>(u), static_cast<float>(v));
+  cv::undistortPoints(grid, ideal, K, D, cv::noArray(), K, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 1e-6));
+  cv::Mat const map(so.height, so.width, CV_32FC2, ideal.data());
+  Pipeline rectified(so.K, {so.width, so.height}, {}, pointRectifier(K, cv::Mat(D).reshape(1, 1), cv::Matx33d::eye(), K, {so.width, so.height}));
+  Pipeline raw(so.K, {so.width, so.height});
+  auto nearestTruthPx = [](ApparentContour const& c, std::vector<SyntheticView> const& views) {
+    double best = 1e9;
+    for (auto const& v : views) {
+      double e = 0.0;
+      for (int s = 0; s < 2; ++s)
+        for (auto const& q : {v.truth.entry_px, v.truth.tip_px})
+          e = std::max(e, std::abs(c.lines[s].dot(footOnLine(v.truth.lines[s], q).homogeneous())));
+      best = std::min(best, e);
+    }
+    return best;
+  };
+  int n[2] = {0, 0}, within[2] = {0, 0};
+  for (int k = 0; k < 40; ++k) {
+    auto const views = scene.frame(k);
+    cv::Mat distorted;
+    cv::remap(renderer.render(views, k), distorted, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0, 0, 0));
+    int i = 0;
+    for (Pipeline* p : {&rectified, &raw}) {
+      PipelineOutput const out = p->process(distorted);
+      ASSERT_TRUE(out.error.empty());
+      for (auto const& o : out.instruments) ++n[i], within[i] += nearestTruthPx(o.contour, views) < 1.5;
+      ++i;
+    }
+  }
+  std::printf("[ distorted ] rectified: %d of %d contours within 1.5 px of the rectified truth; without the rectifier %d of %d\n",
+              within[0], n[0], within[1], n[1]);
+  EXPECT_GT(n[0], 40);
+  EXPECT_GE(within[0], n[0] * 9 / 10);
+  EXPECT_LT(within[1], n[1] * 7 / 10);
+}
+
 TEST(Pipeline, ResetForgetsEveryFrame) {
   SyntheticSceneOptions so;
   SyntheticScene scene(defaultInstruments(), so);

@@ -31,7 +31,7 @@ INCLUDE = re.compile(r'^\s*#\s*include\s*([<"])([^>"]+)[>"]')
 
 def check(root):
     bad = []
-    for kind, top in (("include", os.path.join(root, "include", "endo_guidance")), ("src", os.path.join(root, "src"))):
+    for top in (os.path.join(root, "include", "endo_guidance"), os.path.join(root, "src")):
         for mod in MODULES:
             d = os.path.join(top, mod)
             for dirpath, _, files in os.walk(d):

@@ -12,6 +12,7 @@
 #include "endo_guidance/geometry/cylinder_pose.h"
 #include "endo_guidance/geometry/insertion_point_tracker.h"
 #include "endo_guidance/geometry/shaft_tracking.h"
+#include "endo_guidance/perception/rectification.h"
 #include "endo_guidance/perception/segmentation.h"
 
 namespace endo_guidance::pipeline {
@@ -84,8 +85,11 @@ int attachAxis(geometry::InsertionPointSet& set, geometry::CylinderPose const& p
 /// Stateful (insertion points, tracks); one instance per camera stream; not thread-safe.
 class Pipeline {
  public:
-  /// K: intrinsics of the (rectified) images; size: their expected size.
-  Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params = {});
+  /// K: intrinsics of the rectified camera; size: the images' expected size. `rectify` (distorted
+  /// pixel -> rectified pixel, perception::pointRectifier()) when the images are distorted: each
+  /// contour is refitted to its rectified edge points (perception::rectifyContour(); the image
+  /// is never remapped), and one that cannot be is dropped.
+  Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params = {}, perception::PointRectifier rectify = {});
   /// One frame, seen at `stamp` (s, any origin; NaN: 1 / 25 s after the last frame).
   PipelineOutput process(cv::Mat const& bgr, double stamp = std::numeric_limits<double>::quiet_NaN());
   /// Forgets every frame seen: the segmentation's memory (seed levels, tracked shafts, field of
@@ -104,6 +108,7 @@ class Pipeline {
   perception::InstrumentSegmenter segmenter_;
   geometry::InsertionPointSet points_;
   geometry::ShaftTracker tracker_;
+  perception::PointRectifier rectify_;
 };
 
 }  // namespace endo_guidance::pipeline
