@@ -271,12 +271,7 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
       rectify_ = ros_io::rectifier(*info);
       rectified_for_ = *info;
     }
-    std::vector<geometry::ApparentContour> rectified;
-    for (std::size_t i = 0; i < contours.size(); ++i)
-      if (auto r = perception::rectifyContour(contours[i], seg.edges[i], rectify_, params_.segmentation.contours.min_edge_points,
-                                        params_.segmentation.contours.line_sigma_floor_px))
-        rectified.push_back(*r);
-    contours.swap(rectified);
+    contours = perception::rectifyContours(contours, seg.edges, rectify_, params_.segmentation.contours);
   }
   tracker_.assign(contours);
   ApparentContourArray::Ptr out(new ApparentContourArray);

@@ -46,6 +46,16 @@ std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContou
 }
 
 
+
+std::vector<geometry::ApparentContour> rectifyContours(std::vector<geometry::ApparentContour> const& contours,
+                                                       std::vector<std::array<std::vector<Eigen::Vector2d>, 2>> const& edges,
+                                                       PointRectifier const& rectify, ContourLinesParams const& params) {
+  std::vector<geometry::ApparentContour> out;
+  for (std::size_t i = 0; i < contours.size() && i < edges.size(); ++i)
+    if (auto r = rectifyContour(contours[i], edges[i], rectify, params.min_edge_points, params.line_sigma_floor_px)) out.push_back(*r);
+  return out;
+}
+
 PointRectifier pointRectifier(cv::Matx33d const& K, cv::Mat const& D, cv::Matx33d const& R, cv::Matx33d const& P, cv::Size size) {
   cv::TermCriteria const crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-10);
   cv::Mat const Dc = D.clone();

@@ -93,11 +93,7 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr, double stamp) {
   std::vector<geometry::ApparentContour>* contours = &out.segmentation.contours;
   std::vector<geometry::ApparentContour> rectified;
   if (rectify_) {
-    perception::ContourLinesParams const& cp = params_.segmentation.contours;
-    for (std::size_t i = 0; i < out.segmentation.contours.size(); ++i)
-      if (auto r = perception::rectifyContour(out.segmentation.contours[i], out.segmentation.edges[i], rectify_, cp.min_edge_points,
-                                              cp.line_sigma_floor_px))
-        rectified.push_back(*r);
+    rectified = perception::rectifyContours(out.segmentation.contours, out.segmentation.edges, rectify_, params_.segmentation.contours);
     contours = &rectified;
   }
   tracker_.assign(*contours);

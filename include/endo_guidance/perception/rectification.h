@@ -31,5 +31,10 @@ std::optional<geometry::ApparentContour> rectifyContour(geometry::ApparentContou
                                               std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
                                               PointRectifier const& rectify,
                                               int min_points = 8, double sigma_floor_px = ContourLinesParams{}.line_sigma_floor_px);
+/// rectifyContour() on each contour with its edge points (edges[i] for contours[i]), with the
+/// contour fit's min_edge_points and line_sigma_floor_px; the contours that cannot be are left out.
+std::vector<geometry::ApparentContour> rectifyContours(std::vector<geometry::ApparentContour> const& contours,
+                                                       std::vector<std::array<std::vector<Eigen::Vector2d>, 2>> const& edges,
+                                                       PointRectifier const& rectify, ContourLinesParams const& params);
 
 }  // namespace endo_guidance::perception
