@@ -194,11 +194,10 @@ void InsertionPointTracker::solve() {
   // Along the mean axis the point is fixed only through the axes' angular spread: an error
   // shared by the axes (rms across them at the point) moves it by rms / spread there, averaged
   // over the independent groups of correlation_views axes at best. Early on, the blocks above
-  // cannot see errors shared by all of them (a slow sweep): hard rendered scene, a point 19.6 mm
-  // off claimed 3.3 mm without this floor. The trocar's own motion (breathing, up to
-  // point_motion_sigma of the rms) is shared for longer: by every axis of a breathing cycle, so
-  // it averages over the cycles the axes span (without it, the hard scene without JPEG had a
-  // point located 18.5 mm off while claiming 4.8 mm).
+  // cannot see errors shared by all of them (a slow sweep), which would make a point claim a
+  // fraction of its error. The trocar's own motion (breathing, up to point_motion_sigma of the
+  // rms) is shared for longer: by every axis of a breathing cycle, so it averages over the
+  // cycles the axes span.
   if (e.conditioning > 0.0) {
     double const spread2 = e.conditioning * e.conditioning;
     double floor2 = 0.0;

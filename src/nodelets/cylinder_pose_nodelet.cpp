@@ -89,21 +89,21 @@ void CylinderPoseNodelet::contoursCb(ApparentContourArray::ConstPtr const& msg) 
   int rejected = 0;
   for (auto const& cm : msg->contours) {
     geometry::ApparentContour const c = ros_io::fromMsg(cm);
-    geometry::CylinderPoseResult const r = geometry::estimateCylinderPose(K, params_.radius, c, params_.pose);
-    if (!r.ok()) {  // degenerate geometry (parallel lines, behind the camera, too near/far): flagged, not guessed
+    auto const shaft = pipeline::shaftPose(K, params_.radius, c, params_.pose);
+    if (!shaft) {  // degenerate geometry (parallel lines, behind the camera, too near/far): flagged, not guessed
       ++rejected;
       continue;
     }
-    auto const tip = geometry::backProjectOntoAxis(K, r.pose.axis, c.tip_px);
     InstrumentAxis a;
-    if (!ros_io::toMsg(r.pose, params_.radius, c.residual_px, tip, a)) {
+    if (!ros_io::toMsg(shaft->pose, params_.radius, c.residual_px, shaft->tip_c, a)) {
       ++rejected;
       continue;
     }
     a.insertion_point_id = c.insertion_point_id;
     a.track_id = c.track_id;
     out->axes.push_back(a);
-    if (markers) ros_io::appendShaftMarkers(mk->markers, msg->header, static_cast<int>(out->axes.size()) - 1, r.pose, params_.radius, tip);
+    if (markers) ros_io::appendShaftMarkers(mk->markers, msg->header, static_cast<int>(out->axes.size()) - 1, shaft->pose,
+                                             params_.radius, shaft->tip_c);
   }
   if (rejected > 0) NODELET_DEBUG_STREAM(rejected << " contours gave no valid pose");
   axes_pub_.publish(out);

@@ -5,7 +5,7 @@
 // camera_info (optional lens distortion) and the ground truth: truth/axes, truth/insertion_points
 // (optical frame), truth/camera_pose (in the base). The camera pose in the base is a parameter
 // the vision nodes never see.
-#include <cv_bridge/cv_bridge.h>
+#include <boost/make_shared.hpp>
 #include <geometry_msgs/PoseStamped.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
@@ -37,6 +37,7 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
 
  private:
   void tick(ros::WallTimerEvent const&);
+  sensor_msgs::ImagePtr frameMessage();
 
   ros::NodeHandle nh_, pnh_;
   std::unique_ptr<image_transport::ImageTransport> it_;
@@ -53,6 +54,11 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   Eigen::Isometry3d base_to_camera_ = Eigen::Isometry3d::Identity();
   std::unique_ptr<sim::SceneRenderer> renderer_;
   cv::Mat distortion_map_;
+  // Frame messages, reused once nobody else holds one (an intra-process subscriber keeps a
+  // reference; remote ones are served a copy serialised at publish), and the renderer's working
+  // images: a stream allocates no frame-sized block per frame (the soak's memory, reliability.md).
+  std::vector<sensor_msgs::ImagePtr> frames_;
+  cv::Mat scratch_, rendered_;
   std::vector<std::string> arms_;
   std::string prefix_, base_frame_, camera_frame_;
   double radius_ = 0.004, jaw_length_ = 0.012, breathing_amplitude_ = 0.0, breathing_period_ = 4.0;
@@ -199,22 +205,37 @@ void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {
       axes->axes.push_back(a);
     }
   }
-  cv_bridge::CvImage img;
-  img.header.stamp = stamp;
-  img.header.frame_id = camera_frame_;
-  img.header.seq = static_cast<std::uint32_t>(frame_);
-  img.encoding = "bgr8";
-  img.image = renderer_->render(views, frame_++);
-  if (!distortion_map_.empty()) {
-    cv::Mat d;
-    cv::remap(img.image, d, distortion_map_, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0, 0, 0));
-    img.image = d;
+  sensor_msgs::ImagePtr const msg = frameMessage();
+  msg->header.stamp = stamp;
+  msg->header.frame_id = camera_frame_;
+  msg->header.seq = static_cast<std::uint32_t>(frame_);
+  msg->height = info_.height;
+  msg->width = info_.width;
+  msg->encoding = "bgr8";
+  msg->is_bigendian = 0;
+  msg->step = info_.width * 3;
+  msg->data.resize(static_cast<std::size_t>(msg->step) * msg->height);
+  cv::Mat out(static_cast<int>(msg->height), static_cast<int>(msg->width), CV_8UC3, msg->data.data(), msg->step);
+  if (distortion_map_.empty()) {
+    renderer_->render(views, frame_, out, scratch_);
+  } else {
+    renderer_->render(views, frame_, rendered_, scratch_);
+    cv::remap(rendered_, out, distortion_map_, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0, 0, 0));
   }
+  ++frame_;
   sensor_msgs::CameraInfoPtr info(new sensor_msgs::CameraInfo(info_));
   info->header.stamp = stamp;
-  camera_pub_.publish(img.toImageMsg(), info);
+  camera_pub_.publish(msg, info);
   truth_axes_pub_.publish(axes);
   truth_points_pub_.publish(points);
+}
+
+sensor_msgs::ImagePtr EndoscopeSimulatorNodelet::frameMessage() {
+  for (auto const& m : frames_)
+    if (m.use_count() == 1) return m;
+  auto m = boost::make_shared<sensor_msgs::Image>();
+  if (frames_.size() < 8) frames_.push_back(m);  // (more held at once: a slow subscriber's queue; not pooled)
+  return m;
 }
 
 }  // namespace endo_guidance

@@ -27,6 +27,7 @@
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
 #include "endo_guidance/ros/markers.h"
+#include "endo_guidance/ros/reconfigure.h"
 
 namespace endo_guidance {
 
@@ -89,13 +90,7 @@ void InsertionPointsNodelet::onInit() {
 
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<InsertionPointsConfig>>(reconfigure_mutex_, pnh_);
   InsertionPointsConfig c = InsertionPointsConfig::__getDefault__();  // (every field set, groups included)
-  c.reject_unattached = params_.reject_unattached;
-  c.attach_distance = params_.insertion_points.attach_distance;
-  c.min_conditioning = params_.insertion_points.tracker.min_conditioning;
-  c.max_sigma = params_.insertion_points.tracker.max_sigma;
-  c.point_motion_sigma = params_.insertion_points.tracker.point_motion_sigma;
-  c.breathing_period = params_.insertion_points.tracker.breathing_period;
-  c.gate_max = params_.insertion_points.tracker.gate_max;
+  ros_io::toReconfigure(params_, io::Live::kInsertionPoints, c);
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](InsertionPointsConfig& cfg, uint32_t level) { configCb(cfg, level); });
 
@@ -110,13 +105,7 @@ void InsertionPointsNodelet::onInit() {
 
 void InsertionPointsNodelet::configCb(InsertionPointsConfig& c, uint32_t) {
   std::lock_guard<std::mutex> lock(mutex_);
-  params_.reject_unattached = c.reject_unattached;
-  params_.insertion_points.attach_distance = c.attach_distance;
-  params_.insertion_points.tracker.min_conditioning = c.min_conditioning;
-  params_.insertion_points.tracker.max_sigma = c.max_sigma;
-  params_.insertion_points.tracker.point_motion_sigma = c.point_motion_sigma;
-  params_.insertion_points.tracker.breathing_period = c.breathing_period;
-  params_.insertion_points.tracker.gate_max = c.gate_max;
+  ros_io::fromReconfigure(c, io::Live::kInsertionPoints, params_);
   if (set_) set_->setOptions(params_.insertion_points);
 }
 

@@ -24,6 +24,7 @@
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/ros/conversions.h"
 #include "endo_guidance/ros/frame_monitor.h"
+#include "endo_guidance/ros/reconfigure.h"
 #include "endo_guidance/ros/transport_errors.h"
 
 namespace endo_guidance {
@@ -104,29 +105,7 @@ void SegmentationNodelet::onInit() {
   // Live tuning starts from the loaded values, not the .cfg defaults.
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<SegmentationConfig>>(reconfigure_mutex_, pnh_);
   SegmentationConfig c = SegmentationConfig::__getDefault__();  // (every field set, groups included)
-  auto const& S = params_.segmentation;
-  c.sigma_delta = S.sigma_delta;
-  c.fov_dark_threshold = S.fov.dark_threshold;
-  c.seed_threshold = S.seeds.threshold;
-  c.seed_near_threshold = S.seeds.near_threshold;
-  c.seed_relative_threshold = S.seeds.relative_threshold;
-  c.seed_run_floor = S.seeds.run_floor;
-  c.max_angle_deg = S.contours.max_angle_deg;
-  c.min_length_px = S.contours.min_length_px;
-  c.min_width_px = S.contours.min_width_px;
-  c.max_residual_px = S.contours.max_residual_px;
-  c.min_edge_contrast = S.contours.min_edge_contrast;
-  c.edge_red_green_weight = S.contours.edge_red_green_weight;
-  c.brightness_fallback_contrast = S.contours.brightness_fallback_contrast;
-  c.min_fill = S.contours.min_fill;
-  c.min_elongation = S.contours.min_elongation;
-  c.max_widening = S.contours.max_widening;
-  c.max_glare_fraction = S.contours.max_glare_fraction;
-  c.strip_search = S.strip.enabled;
-  c.crossing_seeds = S.crossing_seeds;
-  c.strip_max_inside_outside_ratio = S.strip.max_inside_outside_ratio;
-  c.max_regions = S.regions.max_regions;
-  c.detect_every = S.tracking.detect_every;
+  ros_io::toReconfigure(params_, io::Live::kSegmentation, c);
   reconfigure_->updateConfig(c);
   reconfigure_->setCallback([this](SegmentationConfig& cfg, uint32_t level) { configCb(cfg, level); });
 
@@ -170,30 +149,8 @@ void SegmentationNodelet::connectCb() {
 
 void SegmentationNodelet::configCb(SegmentationConfig& c, uint32_t) {
   std::lock_guard<std::mutex> lock(mutex_);
-  auto& S = params_.segmentation;
-  S.sigma_delta = c.sigma_delta;
-  S.fov.dark_threshold = c.fov_dark_threshold;
-  S.seeds.threshold = c.seed_threshold;
-  S.seeds.near_threshold = c.seed_near_threshold;
-  S.seeds.relative_threshold = c.seed_relative_threshold;
-  S.seeds.run_floor = c.seed_run_floor;
-  S.contours.max_angle_deg = c.max_angle_deg;
-  S.contours.min_length_px = c.min_length_px;
-  S.contours.min_width_px = c.min_width_px;
-  S.contours.max_residual_px = c.max_residual_px;
-  S.contours.min_edge_contrast = c.min_edge_contrast;
-  S.contours.edge_red_green_weight = c.edge_red_green_weight;
-  S.contours.brightness_fallback_contrast = c.brightness_fallback_contrast;
-  S.contours.min_fill = c.min_fill;
-  S.contours.min_elongation = c.min_elongation;
-  S.contours.max_widening = c.max_widening;
-  S.contours.max_glare_fraction = c.max_glare_fraction;
-  S.strip.enabled = c.strip_search;
-  S.crossing_seeds = c.crossing_seeds;
-  S.strip.max_inside_outside_ratio = c.strip_max_inside_outside_ratio;
-  S.regions.max_regions = c.max_regions;
-  S.tracking.detect_every = c.detect_every;
-  segmenter_.setParams(S);
+  ros_io::fromReconfigure(c, io::Live::kSegmentation, params_);
+  segmenter_.setParams(params_.segmentation);
 }
 
 void SegmentationNodelet::pointsCb(InsertionPointArray::ConstPtr const& msg) {
@@ -256,24 +213,25 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
     }
     last_size_ = size;
   }
-  perception::SegmentationResult const seg = segmenter_.process(cv->image, trocar_images_);
-  {
-    std::lock_guard<std::mutex> lock(diag_mutex_);
-    last_shafts_ = static_cast<int>(seg.contours.size());
-    ++diag_frames_;
-    diag_strip_searches_ += static_cast<std::size_t>(seg.strip_searches);
-  }
-  std::vector<geometry::ApparentContour> contours = seg.contours;
-  // Lens distortion: refit the lines to the rectified edge points.
+  // Lens distortion: the lines refitted to the rectified edge points.
   if (ros_io::hasDistortion(*info)) {
     if (!rectify_ || info->D != rectified_for_.D || info->K != rectified_for_.K || info->R != rectified_for_.R ||
         info->P != rectified_for_.P) {
       rectify_ = ros_io::rectifier(*info);
       rectified_for_ = *info;
     }
-    contours = perception::rectifyContours(contours, seg.edges, rectify_, params_.segmentation.contours);
+  } else {
+    rectify_ = nullptr;
   }
-  tracker_.assign(contours);
+  perception::SegmentationResult seg;
+  std::vector<geometry::ApparentContour> contours =
+      pipeline::segmentShafts(segmenter_, tracker_, cv->image, trocar_images_, rectify_, params_.segmentation.contours, seg);
+  {
+    std::lock_guard<std::mutex> lock(diag_mutex_);
+    last_shafts_ = static_cast<int>(seg.contours.size());
+    ++diag_frames_;
+    diag_strip_searches_ += static_cast<std::size_t>(seg.strip_searches);
+  }
   ApparentContourArray::Ptr out(new ApparentContourArray);
   out->header = image->header;
   out->width = image->width;

@@ -63,7 +63,7 @@ double enteringSine(geometry::ApparentContour const& c, FieldOfView const& fov, 
   return best;
 }
 
-AcrossSamples acrossContour(cv::Mat const& bgr, geometry::ApparentContour const& c, float w) {
+AcrossSamples acrossContour(cv::Mat const& bgr, geometry::ApparentContour const& c) {
   CV_Assert(bgr.type() == CV_8UC3);
   AcrossSamples s;
   Eigen::Vector2d const e = c.entry_px, ax = c.tip_px - c.entry_px;
@@ -71,7 +71,7 @@ AcrossSamples acrossContour(cv::Mat const& bgr, geometry::ApparentContour const&
     int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
     if (x < 0 || y < 0 || x >= bgr.cols || y >= bgr.rows) return;
     cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
-    v.push_back(edgeChannel(px[0], px[1], px[2], w));
+    v.push_back(edgeChannel(px[0], px[1], px[2]));
     if (inside && std::max({px[0], px[1], px[2]}) >= 230 && ColourFeature::chroma(px[0], px[1], px[2]) < 30.f) ++s.glare;
   };
   for (int i = 1; i < 40; ++i) {
@@ -90,7 +90,7 @@ bool mostlyGlare(AcrossSamples const& s, ContourLinesParams const& p) {
 }
 
 bool mostlyGlare(cv::Mat const& bgr, geometry::ApparentContour const& contour, ContourLinesParams const& p) {
-  return mostlyGlare(acrossContour(bgr, contour, static_cast<float>(p.edge_red_green_weight)), p);
+  return mostlyGlare(acrossContour(bgr, contour), p);
 }
 
 

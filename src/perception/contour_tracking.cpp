@@ -203,7 +203,7 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   }
   // The fitted extent is the detection's, cut at the tip (a withdrawal). Grown with the tip, it
   // took in the wrist beyond a robotic shaft (in line with it), whose edges then let the tip run
-  // on by a width per frame (Dataset 1: 263 -> 545 px in three frames); shrunk by the tip's
+  // on by a width per frame; shrunk by the tip's
   // steps, it ratcheted down on a still image. An inserted shaft's tip still follows, up to 2.5
   // widths beyond the edges, until the next detection.
   now.edge_start = edge_start;

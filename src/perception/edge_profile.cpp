@@ -17,7 +17,7 @@ namespace endo_guidance::perception {
 namespace {
 
 // (x, y); false outside.
-bool edgeAt(cv::Mat const& bgr, double x, double y, float w, float* out, float* value = nullptr) {
+bool edgeAt(cv::Mat const& bgr, double x, double y, float* out) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
   int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
@@ -26,8 +26,7 @@ bool edgeAt(cv::Mat const& bgr, double x, double y, float w, float* out, float* 
   float c[3];
   for (int k = 0; k < 3; ++k)
     c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
-  *out = edgeChannel(c[0], c[1], c[2], w);
-  if (value) *value = std::max(c[0], std::max(c[1], c[2]));
+  *out = edgeChannel(c[0], c[1], c[2]);
   return true;
 }
 
@@ -54,9 +53,9 @@ __attribute__((target("avx2"))) inline __m256 channel(__m256i q, int ch, __m256i
 // sample whose loads would pass the end of its row (the last two columns) takes edgeAt(), as
 // does a profile shorter than 8 samples. The last step overlaps the one before.
 __attribute__((target("avx2"))) void sampleEdgeChannelAvx2(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d,
-                                                      int count, float w, float* out) {
+                                                      int count, float* out) {
   if (count < 8) {
-    for (int i = 0; i < count; ++i) edgeAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), w, &out[i]);
+    for (int i = 0; i < count; ++i) edgeAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), &out[i]);
     return;
   }
   int const stride = static_cast<int>(bgr.step[0]);
@@ -74,7 +73,7 @@ __attribute__((target("avx2"))) void sampleEdgeChannelAvx2(cv::Mat const& bgr, E
     __m128i const yi_lo = _mm256_cvttpd_epi32(y_lo), yi_hi = _mm256_cvttpd_epi32(y_hi);
     __m256i const x0 = _mm256_set_m128i(xi_hi, xi_lo), y0 = _mm256_set_m128i(yi_hi, yi_lo);
     if (!_mm256_testz_si256(_mm256_cmpgt_epi32(x0, x_last), _mm256_cmpgt_epi32(x0, x_last))) {
-      for (int k = i; k < i + 8; ++k) edgeAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), w, &out[k]);
+      for (int k = i; k < i + 8; ++k) edgeAt(bgr, a.x() + k * d.x(), a.y() + k * d.y(), &out[k]);
       continue;
     }
     __m256 const fx = _mm256_set_m128(_mm256_cvtpd_ps(_mm256_sub_pd(x_hi, _mm256_cvtepi32_pd(xi_hi))),
@@ -87,34 +86,37 @@ __attribute__((target("avx2"))) void sampleEdgeChannelAvx2(cv::Mat const& bgr, E
     __m256i const q00 = cornerLanes(base, offs), q01 = cornerLanes(base + 3, offs), q10 = cornerLanes(base + stride, offs),
                   q11 = cornerLanes(base + stride + 3, offs);
     __m256 const ofx = _mm256_sub_ps(one, fx), ofy = _mm256_sub_ps(one, fy);
-    __m256 mx, mn, c[3];
+    __m256 mx, mn;
     for (int ch = 0; ch < 3; ++ch) {
       __m256 const v = _mm256_add_ps(
           _mm256_mul_ps(ofy, _mm256_add_ps(_mm256_mul_ps(ofx, channel(q00, ch, mask)), _mm256_mul_ps(fx, channel(q01, ch, mask)))),
           _mm256_mul_ps(fy, _mm256_add_ps(_mm256_mul_ps(ofx, channel(q10, ch, mask)), _mm256_mul_ps(fx, channel(q11, ch, mask)))));
-      c[ch] = v;
       mx = ch == 0 ? v : _mm256_max_ps(mx, v);
       mn = ch == 0 ? v : _mm256_min_ps(mn, v);
     }
-    // edgeChannel(), its operations in its order.
-    __m256 const e = _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(1.f - w), _mm256_sub_ps(mx, mn)),
-                                   _mm256_mul_ps(_mm256_set1_ps(w * kRedGreenScale), _mm256_sub_ps(c[2], c[1])));
-    _mm256_storeu_ps(out + i, e);
+    _mm256_storeu_ps(out + i, _mm256_sub_ps(mx, mn));  // edgeChannel()
   }
 }
 #endif
 
+}  // namespace
+
 // The edge channel at a + i d, i = 0..count-1, bilinear, all inside the image (edgeAt() without the
-// bounds test and the brightness: the inner loop of the sub-pixel refinement). One sample per
+// bounds test: the inner loop of the sub-pixel refinement). One sample per
 // SIMD step with the channels in the lanes: each corner is one 4-byte load (B, G, R and the next
 // pixel's B, unused), interpolated with the same operations, in the same order, as edgeAt(), so
 // the results are identical. A sample whose 4-byte load would pass the end of its row (the last
 // two columns) takes edgeAt(). On a CPU with AVX2 (and OpenCV's optimisations on:
 // cv::setUseOptimized()), eight samples per step (sampleEdgeChannelAvx2()), the same results. perf on
 // a 640x480 frame: the sampler's share 14 % with two samples per step, 11 % with eight.
-void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float w, float* out) {
+void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out,
+                       bool reference) {
+  if (reference) {
+    for (int i = 0; i < count; ++i) edgeAt(bgr, a.x() + i * d.x(), a.y() + i * d.y(), &out[i]);
+    return;
+  }
 #ifdef ENDO_GUIDANCE_AVX2
-  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleEdgeChannelAvx2(bgr, a, d, count, w, out);
+  if (cv::checkHardwareSupport(CV_CPU_AVX2)) return sampleEdgeChannelAvx2(bgr, a, d, count, out);
 #endif
   std::size_t const stride = bgr.step[0];
   std::uint8_t const* const data = bgr.data;
@@ -129,7 +131,7 @@ void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vect
     double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
     int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
     if (x0 > x_last) {
-      edgeAt(bgr, x, y, w, &out[i]);
+      edgeAt(bgr, x, y, &out[i]);
       continue;
     }
     cv::v_float32x4 const fx = cv::v_setall_f32(static_cast<float>(x - x0)), fy = cv::v_setall_f32(static_cast<float>(y - y0));
@@ -138,10 +140,11 @@ void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vect
     cv::v_float32x4 const c = (one - fy) * ((one - fx) * corner(p0) + fx * corner(p0 + 3)) +
                               fy * ((one - fx) * corner(p1) + fx * corner(p1 + 3));  // B, G, R, -
     cv::v_float32x4 const c1 = cv::v_rotate_right<1>(c), c2 = cv::v_rotate_right<2>(c);  // G, R, ... and R, ...
-    float const chroma = (cv::v_max(c, cv::v_max(c1, c2)) - cv::v_min(c, cv::v_min(c1, c2))).get0();
-    out[i] = (1.f - w) * chroma + (w * kRedGreenScale) * (c2.get0() - c1.get0());  // edgeChannel()
+    out[i] = (cv::v_max(c, cv::v_max(c1, c2)) - cv::v_min(c, cv::v_min(c1, c2))).get0();  // edgeChannel()
   }
 }
+
+namespace {
 
 // Sub-pixel position (in samples) of the steepest descent of a profile (tissue at index 0, shaft
 // at the end): the centroid of the slope about its peak, within +-2.5 px -- exact for a
@@ -151,7 +154,7 @@ void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vect
 // contiguous lobe of the peak whose slope stays above lobe_floor times the peak counts (whole
 // samples, uncut), not the slope of textured tissue further in the window, which counts only
 // where it descends (ascents weigh nothing) and so pulls the edge outward (test
-// SubpixelEdgeIsNotPulledByTheTissueTexture; rendered clean scene 0.013 -> 0.007 px); < 0:
+// SubpixelEdgeIsNotPulledByTheTissueTexture); < 0:
 // every descending sample of the window. nullopt: no descent steeper than min_slope (per sample
 // pair), or the window would be cut by the profile's end (the centroid would be biased).
 std::optional<double> steepestDescent(std::vector<float> const& prof, double ds, double min_slope, double lobe_floor) {
@@ -194,9 +197,7 @@ class EdgeProfiler {
  public:
   EdgeProfiler(cv::Mat const& bgr, ContourLinesParams const& p)
       : bgr_(bgr), p_(p), h_(p.refine_halfwidth_px), ds_(p.profile_step_px),
-        ns_(static_cast<int>(std::lround(2.0 * h_ / ds_)) + 1), prof_(static_cast<std::size_t>(ns_)),
-        val_(static_cast<std::size_t>(ns_)), need_value_(p.brightness_fallback_contrast > 0.0),
-        w_(static_cast<float>(p.edge_red_green_weight)) {}
+        ns_(static_cast<int>(std::lround(2.0 * h_ / ds_)) + 1), prof_(static_cast<std::size_t>(ns_)) {}
 
   // The edge on the profile across `line` at t along its direction (-b, a); nullopt when the
   // profile leaves the image or has no edge steeper than min_edge_contrast.
@@ -211,21 +212,10 @@ class EdgeProfiler {
     if (!(std::min(a.x(), b.x()) >= 0.0 && std::min(a.y(), b.y()) >= 0.0 && std::max(a.x(), b.x()) < xmax &&
           std::max(a.y(), b.y()) < ymax))
       return std::nullopt;
-    if (need_value_) {
-      for (int i = 0; i < ns_; ++i) {
-        Eigen::Vector2d const q = base + (-h_ + i * ds_) * n;
-        edgeAt(bgr_, q.x(), q.y(), w_, &prof_[i], &val_[i]);
-      }
-    } else {
-      sampleEdgeChannel(bgr_, a, ds_ * n, ns_, w_, prof_.data());
-    }
-    // The edge is located in the edge channel (chroma, with the red-green term if set), where
-    // the shaded rim of a grey shaft does not bias it (metal mirrors tissue colours, so it is the
-    // steepest descent, not the first seen from inside --
-    // the latter doubled the in-vivo line error). A black shaft against pale tissue may have too
-    // little chroma contrast: then its drop in brightness is used.
-    auto at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_, p_.edge_lobe_floor);
-    if (!at && need_value_) at = steepestDescent(val_, ds_, p_.brightness_fallback_contrast * 2.0 * ds_, p_.edge_lobe_floor);
+    sampleEdgeChannel(bgr_, a, ds_ * n, ns_, prof_.data());
+    // The edge is located in the edge channel, where the shaded rim of a grey shaft does not bias
+    // it (metal mirrors tissue colours, so it is the steepest descent, not the first seen from inside).
+    auto const at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_, p_.edge_lobe_floor);
     if (!at) return std::nullopt;
     return Eigen::Vector2d(base + (-h_ + *at * ds_) * n);
   }
@@ -235,9 +225,7 @@ class EdgeProfiler {
   ContourLinesParams const& p_;
   double const h_, ds_;
   int const ns_;
-  std::vector<float> prof_, val_;
-  bool const need_value_;
-  float const w_;  // edgeChannel()'s red-green weight
+  std::vector<float> prof_;
 };
 
 // The sub-pixel edge points of refineLineSubpixel(): one per profile with an edge steeper than
@@ -280,7 +268,7 @@ ContourLinesParams widePass(ContourLinesParams const& p) {
   ContourLinesParams wide = p;
   wide.refine_halfwidth_px = p.coarse_halfwidth_px;
   wide.profile_step_px = 2.0 * p.profile_step_px;
-  wide.edge_lobe_floor = -1.0;  // it recentres and scores: the whole window (the lobe alone there: robotic Dataset 1 -4 shafts)
+  wide.edge_lobe_floor = -1.0;  // it recentres and scores: the whole window (the lobe alone loses weak shafts)
   return wide;
 }
 

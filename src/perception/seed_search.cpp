@@ -116,8 +116,7 @@ std::vector<Seed> findSeeds(cv::Mat const& feature, FieldOfView const& fov, Seed
       int mid = (i + len / 2) % n;
       s.mean_value = sum / len;
       // Its lowest stretch under the relative threshold alone, if one is a seed's width: the shaft
-      // beside a blob of about its level (hard scene frames 3-8: the left shaft beside the gauze,
-      // a run of 119 points whose middle lies on the gauze).
+      // beside a blob of about its level (gauze), one run whose middle lies on the blob.
       float lowest = std::numeric_limits<float>::infinity();
       for (int a = 0; a < len;) {
         if (!strict[(i + a) % n]) {

@@ -82,9 +82,8 @@ bool continuesBeyond(geometry::ApparentContour const& c, cv::Mat const& labels, 
 }  // namespace
 
 namespace {
-// Instruments of one radius are about as wide where they cross, at about the same depth (the
-// false pairs crossing seeds gave on the hard rendered scene were jaws: 0.2x the shaft they
-// lay beside).
+// Instruments of one radius are about as wide where they cross, at about the same depth (a
+// crossing seed's false pair, jaws beside a shaft, is a fraction of its width).
 constexpr double kCrossingMinWidthRatio = 0.5;
 // A contour's width at its tip over its width at its entry.
 double widening(geometry::ApparentContour const& c) {
@@ -150,7 +149,7 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
     TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
     // Lost, no longer less chromatic than the tissue beside it, or now glare: this is a detection frame.
     if (!r.shaft) return std::nullopt;
-    AcrossSamples const across = acrossContour(bgr, r.shaft->contour, edgeWeight());
+    AcrossSamples const across = acrossContour(bgr, r.shaft->contour);
     if (!stripContrastFullRes(across, params_.strip) || mostlyGlare(across, params_.contours)) return std::nullopt;
     now.push_back(std::move(*r.shaft));
   }
@@ -389,7 +388,7 @@ struct InstrumentSegmenter::SeedSearch {
     if (!sc) return;
     ContourFit f = refineStrip(*sc, S.fov_, F.bgr, F.scale, P.strip, P.contours);
     if (f.contour) {
-      AcrossSamples const across = acrossContour(F.bgr, *f.contour, S.edgeWeight());
+      AcrossSamples const across = acrossContour(F.bgr, *f.contour);
       if (!stripContrastFullRes(across, P.strip)) f.rejection = ContourRejection::kLowContrast;
       else if (mostlyGlare(across, P.contours)) f.rejection = ContourRejection::kGlare;
       if (f.rejection != ContourRejection::kNone) f.contour.reset();
@@ -421,7 +420,7 @@ struct InstrumentSegmenter::SeedSearch {
   // The checks of a fitted contour beyond the contour fit's: contrast, tip, glare and widening for
   // a re-sought pair; width and continuation for a crossing shaft.
   ContourRejection check(geometry::ApparentContour const& c, Candidate const& cd) const {
-    AcrossSamples const across = acrossContour(F.bgr, c, S.edgeWeight());
+    AcrossSamples const across = acrossContour(F.bgr, c);
     if (cd.resought && !stripContrastFullRes(across, F.resought_contrast)) return ContourRejection::kLowContrast;
     if (cd.resought && depthAt(view, toProcessing(c.tip_px, F.scale)) < P.resought_min_tip_depth_px) return ContourRejection::kTipOnBorder;
     if (mostlyGlare(across, P.contours)) return ContourRejection::kGlare;
@@ -830,9 +829,7 @@ void InstrumentSegmenter::addCrossingSeeds(SegmentationResult& res, std::vector<
   }
 }
 
-// The memory of the nearest of last frame's seeds within level_memory_px. (Matching a tracked
-// shaft's memory anywhere within half the border run, or by run overlap, would spare a full
-// search when the middle of its run jumps, but cost 2-3 % recall on robotic Dataset 1.)
+// The memory of the nearest of last frame's seeds within level_memory_px.
 InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& seed) const {
   Memory const* best = nullptr;
   int best_d = 0;

@@ -148,9 +148,8 @@ int countNearLineScalar(PointColumns const& pc, double nx, double ny, double c) 
   return count;
 }
 #ifdef ENDO_GUIDANCE_AVX2
-// Four points per step (AVX2 without FMA: the same roundings as the scalar loop). perf on the
-// EndoVis robotic videos: this count was 16 % of a frame's samples (re-sought sides of regions
-// that leaked: straightRun() over boundaries of thousands of points, 120-240 lines each).
+// Four points per step (AVX2 without FMA: the same roundings as the scalar loop): straightRun()
+// counts over boundaries of thousands of points for each of hundreds of lines.
 __attribute__((target("avx2"))) int countNearLineAvx2(PointColumns const& pc, double nx, double ny, double c) {
   std::size_t const n = pc.x.size();
   __m256d const vnx = _mm256_set1_pd(nx), vny = _mm256_set1_pd(ny), vc = _mm256_set1_pd(c), one = _mm256_set1_pd(1.0),

@@ -572,8 +572,8 @@ ContourFit refineStrip(StripCandidate const& strip, FieldOfView const& fov, cv::
   return f;
 }
 
-bool stripContrastFullRes(cv::Mat const& bgr, geometry::ApparentContour const& c, StripSearchParams const& p, float w) {
-  return stripContrastFullRes(acrossContour(bgr, c, w), p);
+bool stripContrastFullRes(cv::Mat const& bgr, geometry::ApparentContour const& c, StripSearchParams const& p) {
+  return stripContrastFullRes(acrossContour(bgr, c), p);
 }
 
 bool stripContrastFullRes(AcrossSamples s, StripSearchParams const& p) {

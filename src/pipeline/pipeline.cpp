@@ -61,6 +61,25 @@ int attachAxis(geometry::InsertionPointSet& set, geometry::CylinderPose const& p
   return id;
 }
 
+std::vector<geometry::ApparentContour> segmentShafts(perception::InstrumentSegmenter& segmenter, geometry::ShaftTracker& tracker,
+                                                     cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocar_images,
+                                                     perception::PointRectifier const& rectify,
+                                                     perception::ContourLinesParams const& contour_params,
+                                                     perception::SegmentationResult& result) {
+  result = segmenter.process(bgr, trocar_images);
+  std::vector<geometry::ApparentContour> contours =
+      rectify ? perception::rectifyContours(result.contours, result.edges, rectify, contour_params) : result.contours;
+  tracker.assign(contours);
+  return contours;
+}
+
+std::optional<ShaftPose> shaftPose(Eigen::Matrix3d const& K, double radius, geometry::ApparentContour const& contour,
+                                   geometry::CylinderPoseOptions const& options) {
+  geometry::CylinderPoseResult const r = geometry::estimateCylinderPose(K, radius, contour, options);
+  if (!r.ok()) return std::nullopt;
+  return ShaftPose{r.pose, geometry::backProjectOntoAxis(K, r.pose.axis, contour.tip_px)};
+}
+
 Pipeline::Pipeline(Eigen::Matrix3d const& K, cv::Size size, PipelineParams const& params, perception::PointRectifier rectify)
     : K_(K), size_(size), params_(params), segmenter_(params.segmentation),
       points_(outOfViewOptions(params.insertion_points, K, size)), tracker_(params.tracking), rectify_(std::move(rectify)) {}
@@ -87,34 +106,26 @@ PipelineOutput Pipeline::process(cv::Mat const& bgr, double stamp) {
   std::vector<Eigen::Vector3d> trocar_images;
   wellConditionedImages(points_, K_, &trocar_images);
   bool const established = !trocar_images.empty();
-  out.segmentation = segmenter_.process(bgr, trocar_images);
-  // The segmentation's contours are in the image's pixels (its overlay is drawn on the image);
-  // with lens distortion, the poses take them refitted in rectified pixels.
-  std::vector<geometry::ApparentContour>* contours = &out.segmentation.contours;
-  std::vector<geometry::ApparentContour> rectified;
-  if (rectify_) {
-    rectified = perception::rectifyContours(out.segmentation.contours, out.segmentation.edges, rectify_, params_.segmentation.contours);
-    contours = &rectified;
-  }
-  tracker_.assign(*contours);
-  for (geometry::ApparentContour const& c : *contours) {
-    geometry::CylinderPoseResult const r = geometry::estimateCylinderPose(K_, params_.radius, c, params_.pose);
-    if (!r.ok()) {
+  std::vector<geometry::ApparentContour> const contours =
+      segmentShafts(segmenter_, tracker_, bgr, trocar_images, rectify_, params_.segmentation.contours, out.segmentation);
+  for (geometry::ApparentContour const& c : contours) {
+    auto const shaft = shaftPose(K_, params_.radius, c, params_.pose);
+    if (!shaft) {
       ++out.rejected_pose;
       continue;
     }
     InstrumentObservation o;
     o.contour = c;
-    o.pose = r.pose;
+    o.pose = shaft->pose;
     bool keep = true;
-    o.insertion_point = attachAxis(points_, r.pose, params_.reject_unattached, established, &keep, stamp);
+    o.insertion_point = attachAxis(points_, o.pose, params_.reject_unattached, established, &keep, stamp);
     o.contour.insertion_point_id = o.insertion_point;
     o.track = c.track_id;
     if (!keep) {
       ++out.rejected_unattached;
       continue;
     }
-    o.tip_c = geometry::backProjectOntoAxis(K_, r.pose.axis, c.tip_px);
+    o.tip_c = shaft->tip_c;
     out.instruments.push_back(o);
   }
   out.insertion_points = reportInsertionPoints(points_, K_);

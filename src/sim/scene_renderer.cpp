@@ -89,7 +89,15 @@ SceneRenderer::SceneRenderer(int width, int height, RenderOptions const& o) : wi
 }
 
 cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::Mat* labels) const {
-  cv::Mat img = tissue_.clone();
+  cv::Mat out, scratch;
+  render(views, k, out, scratch, labels);
+  return out;
+}
+
+void SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::Mat& out, cv::Mat& scratch,
+                           cv::Mat* labels) const {
+  tissue_.copyTo(scratch);
+  cv::Mat& img = scratch;
   if (labels) *labels = cv::Mat::zeros(height_, width_, CV_8U);
   // Far to near (by tip depth), so nearer shafts occlude farther ones.
   std::vector<SyntheticView const*> order;
@@ -146,7 +154,7 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv
     }
   }
   // Field of view, noise, 8-bit.
-  cv::Mat out(height_, width_, CV_8UC3);
+  out.create(height_, width_, CV_8UC3);
   std::normal_distribution<float> N(0.f, static_cast<float>(options_.noise_sigma));
   bool const noisy = options_.noise_sigma > 0.0;
   for (int y = 0; y < height_; ++y)
@@ -159,9 +167,8 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv
   if (options_.jpeg_quality > 0) {
     std::vector<std::uint8_t> buf;
     cv::imencode(".jpg", out, buf, {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality});
-    out = cv::imdecode(buf, cv::IMREAD_COLOR);
+    cv::imdecode(buf, cv::IMREAD_COLOR).copyTo(out);
   }
-  return out;
 }
 
 }  // namespace endo_guidance::sim

@@ -2,8 +2,13 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <cmath>
 #include <fstream>
+#include <iterator>
+#include <set>
+#include <type_traits>
 
+#include "endo_guidance/io/parameter_table.h"
 #include "endo_guidance/io/yaml_config.h"
 
 using namespace endo_guidance::perception;
@@ -58,7 +63,6 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
                           "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  strip_full_res_outside_quantile: 1.5\n",
                           "segmentation:\n  strip_retry_min_halfwidth_px: -1\n",
-                          "segmentation:\n  brightness_fallback_contrast: -2\n",
                           "segmentation:\n  full_search_every: 0\n", "segmentation:\n  max_regions: 0\n",
                           "segmentation:\n  full_search_max_every: 0\n", "segmentation:\n  refused_area_change: 1.5\n",
                           "segmentation:\n  seed_threshold: 300\n", "pose:\n  min_distance: 3.0\n",
@@ -71,60 +75,19 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
       EXPECT_NE(std::string(e.what()).find("must be"), std::string::npos) << e.what();
     }
   }
-  // config/pipeline.yaml holds exactly the code defaults.
-  PipelineParams const defaults;
+  // config/pipeline.yaml holds exactly the code defaults: read back, every value prints as its default.
   PipelineParams shipped;
   io::loadPipelineYaml(ENDO_GUIDANCE_SOURCE_DIR "/config/pipeline.yaml", shipped);
-  EXPECT_EQ(shipped.radius, defaults.radius);
-  EXPECT_EQ(shipped.segmentation.regions.thresholds, defaults.segmentation.regions.thresholds);
-  EXPECT_EQ(shipped.segmentation.seeds.threshold, defaults.segmentation.seeds.threshold);
-  EXPECT_EQ(shipped.segmentation.contours.max_residual_px, defaults.segmentation.contours.max_residual_px);
-  EXPECT_EQ(shipped.segmentation.contours.min_fill, defaults.segmentation.contours.min_fill);
-  EXPECT_EQ(shipped.segmentation.contours.min_elongation, defaults.segmentation.contours.min_elongation);
-  EXPECT_EQ(shipped.segmentation.contours.max_widening, defaults.segmentation.contours.max_widening);
-  EXPECT_EQ(shipped.segmentation.sigma_delta, defaults.segmentation.sigma_delta);
-  EXPECT_EQ(shipped.insertion_points.tracker.memory_views, defaults.insertion_points.tracker.memory_views);
-  EXPECT_EQ(shipped.insertion_points.tracker.gate_max, defaults.insertion_points.tracker.gate_max);
-  EXPECT_EQ(shipped.insertion_points.tracker.breathing_period, defaults.insertion_points.tracker.breathing_period);
-  EXPECT_EQ(shipped.pose.min_distance, defaults.pose.min_distance);
-  EXPECT_EQ(shipped.segmentation.seeds.relative_threshold, defaults.segmentation.seeds.relative_threshold);
-  EXPECT_EQ(shipped.segmentation.seeds.run_floor, defaults.segmentation.seeds.run_floor);
-  EXPECT_EQ(shipped.segmentation.seeds.dark_border_level, defaults.segmentation.seeds.dark_border_level);
-  EXPECT_EQ(shipped.segmentation.regions.background_fractions, defaults.segmentation.regions.background_fractions);
-  EXPECT_EQ(shipped.segmentation.strip.enabled, defaults.segmentation.strip.enabled);
-  EXPECT_EQ(shipped.segmentation.crossing_seeds, defaults.segmentation.crossing_seeds);
-  EXPECT_EQ(shipped.segmentation.detector, defaults.segmentation.detector);
-  EXPECT_EQ(shipped.segmentation.learned.model, defaults.segmentation.learned.model);
-  EXPECT_EQ(shipped.segmentation.learned.threads, defaults.segmentation.learned.threads);
-  EXPECT_EQ(shipped.segmentation.level_memory_px, defaults.segmentation.level_memory_px);
-  EXPECT_EQ(shipped.segmentation.full_search_every, defaults.segmentation.full_search_every);
-  EXPECT_EQ(shipped.segmentation.strip_search_max_every, defaults.segmentation.strip_search_max_every);
-  EXPECT_EQ(shipped.segmentation.full_search_max_every, defaults.segmentation.full_search_max_every);
-  EXPECT_EQ(shipped.segmentation.refused_area_change, defaults.segmentation.refused_area_change);
-  EXPECT_EQ(shipped.segmentation.resought_min_entry_sine, defaults.segmentation.resought_min_entry_sine);
-  EXPECT_EQ(shipped.segmentation.resought_min_tip_depth_px, defaults.segmentation.resought_min_tip_depth_px);
-  EXPECT_EQ(shipped.segmentation.resought_max_widening, defaults.segmentation.resought_max_widening);
-  EXPECT_EQ(shipped.segmentation.contours.extend_max_misses, defaults.segmentation.contours.extend_max_misses);
-  EXPECT_EQ(shipped.segmentation.contours.edge_lobe_floor, defaults.segmentation.contours.edge_lobe_floor);
-  EXPECT_EQ(shipped.segmentation.contours.brightness_fallback_contrast, defaults.segmentation.contours.brightness_fallback_contrast);
-  EXPECT_EQ(shipped.segmentation.tracking.detect_every, defaults.segmentation.tracking.detect_every);
-  EXPECT_EQ(shipped.segmentation.tracking.max_width_change, defaults.segmentation.tracking.max_width_change);
-  EXPECT_EQ(shipped.segmentation.tracking.coarse_step_px, defaults.segmentation.tracking.coarse_step_px);
-  EXPECT_EQ(shipped.segmentation.tracking.tip_reach_px, defaults.segmentation.tracking.tip_reach_px);
-  using SP = StripSearchParams;
-  for (double SP::*m : {&SP::max_angle_deg, &SP::min_response, &SP::min_inside_low, &SP::max_inside_outside_ratio,
-                        &SP::min_length_ratio, &SP::max_full_res_ratio, &SP::max_full_res_ratio_matte,
-                        &SP::max_specular_fraction, &SP::full_res_outside_quantile, &SP::retry_min_halfwidth_px})
-    EXPECT_EQ(shipped.segmentation.strip.*m, defaults.segmentation.strip.*m);
+  EXPECT_EQ(io::pipelineYaml(shipped), io::pipelineYaml());
+  PipelineParams changed;
+  changed.segmentation.sigma_delta = 11;
+  EXPECT_NE(io::pipelineYaml(changed), io::pipelineYaml());  // (the comparison sees a change)
   PipelineParams off;
   io::loadPipelineYaml(write("s.yaml", "segmentation:\n  strip_search: false\n  strip_min_length_ratio: 0.7\n  strip_search_max_every: 40\n  crossing_seeds: false\n"), off);
   EXPECT_FALSE(off.segmentation.strip.enabled);
   EXPECT_FALSE(off.segmentation.crossing_seeds);
   EXPECT_EQ(off.segmentation.strip.min_length_ratio, 0.7);
   EXPECT_EQ(off.segmentation.strip_search_max_every, 40);
-  PipelineParams on;
-  io::loadPipelineYaml(write("b.yaml", "segmentation:\n  brightness_fallback_contrast: 8\n"), on);
-  EXPECT_EQ(on.segmentation.contours.brightness_fallback_contrast, 8.0);
 }
 
 // The detector switch: read, spelled out in errors, its learned parameters validated.
@@ -140,4 +103,54 @@ TEST(YamlConfig, DetectorSwitch) {
   PipelineParams q;
   EXPECT_THROW(io::loadPipelineYaml(write("e.yaml", "segmentation:\n  detector: hough\n"), q), std::runtime_error);
   EXPECT_THROW(io::loadPipelineYaml(write("t.yaml", "segmentation:\n  learned_threads: 0\n"), q), std::runtime_error);
+}
+
+namespace {
+std::string readFile(std::string const& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+}  // namespace
+
+// The files that come from the parameter table are what it gives (else: scripts/write_parameter_files.sh).
+TEST(YamlConfig, ParameterFilesMatchTheTable) {
+  EXPECT_EQ(readFile(ENDO_GUIDANCE_SOURCE_DIR "/config/pipeline.yaml"), io::pipelineYaml())
+      << "config/pipeline.yaml is not the parameter table's: run scripts/write_parameter_files.sh";
+  EXPECT_EQ(readFile(ENDO_GUIDANCE_SOURCE_DIR "/cfg/Segmentation.cfg"), io::reconfigureCfg(io::Live::kSegmentation))
+      << "cfg/Segmentation.cfg is not the parameter table's: run scripts/write_parameter_files.sh";
+  EXPECT_EQ(readFile(ENDO_GUIDANCE_SOURCE_DIR "/cfg/InsertionPoints.cfg"), io::reconfigureCfg(io::Live::kInsertionPoints))
+      << "cfg/InsertionPoints.cfg is not the parameter table's: run scripts/write_parameter_files.sh";
+}
+
+// Every key once; every default inside its own range (a table line that refuses its default
+// would make every start fail); a value just outside the range is refused with the key's name.
+TEST(YamlConfig, TheTableHoldsItsDefaults) {
+  PipelineParams p;
+  std::set<std::string> keys;
+  int checked = 0;
+  io::forEachPipelineParam(p, [&](io::ParamInfo const& info, auto&& field) {
+    using T = std::decay_t<decltype(field)>;
+    EXPECT_TRUE(keys.insert(info.key).second) << info.key;
+    EXPECT_LE(info.min, info.max) << info.key;
+    if constexpr (std::is_same_v<T, double> || std::is_same_v<T, int>) {
+      EXPECT_GE(static_cast<double>(field), info.min) << info.key;
+      EXPECT_LE(static_cast<double>(field), info.max) << info.key;
+      std::string const key(info.key);
+      auto const slash = key.find('/');
+      double const beyond = info.max + std::max(1.0, std::abs(info.max));
+      std::string const yaml = slash == std::string::npos ? key + ": " + std::to_string(beyond) + "\n"
+                                                          : key.substr(0, slash) + ":\n  " + key.substr(slash + 1) + ": " +
+                                                                std::to_string(std::is_same_v<T, int> ? std::floor(beyond) : beyond) + "\n";
+      PipelineParams q;
+      try {
+        io::parsePipelineYaml(std::is_same_v<T, int> ? yaml.substr(0, yaml.find('.')) + "\n" : yaml, q);
+        ADD_FAILURE() << "accepted beyond its range: " << yaml;
+      } catch (std::runtime_error const& e) {
+        EXPECT_NE(std::string(e.what()).find(info.key), std::string::npos) << e.what();
+      }
+      ++checked;
+    }
+  });
+  EXPECT_GE(keys.size(), 60u);
+  EXPECT_GE(checked, 50);
 }

@@ -291,21 +291,21 @@ TEST(StripSearch, FullResolutionContrastRefusesSpeckleBands) {
   float const averaged = ColourFeature::chroma(avg[0], avg[1], avg[2]), tissue = ColourFeature::chroma(70, 90, 200);
   EXPECT_LT(averaged, 0.75 * tissue) << "the band is not greyer than the tissue once averaged: no test";
   StripSearchParams const sp;
-  EXPECT_FALSE(stripContrastFullRes(speckled, c, sp, 0.f));
+  EXPECT_FALSE(stripContrastFullRes(speckled, c, sp));
   cv::Mat shaft = img.clone();
   shaft(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
-  EXPECT_TRUE(stripContrastFullRes(shaft, c, sp, 0.f));
+  EXPECT_TRUE(stripContrastFullRes(shaft, c, sp));
   // Metal mirroring the tissue: weakly contrasted (chroma at 0.7 of the tissue's) but matte.
   cv::Mat mirror = img.clone();
   float const t = ColourFeature::chroma(70, 90, 200);
   mirror(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(100, 110, 100 + 0.7 * t));
   cv::Vec3b const mp = mirror.at<cv::Vec3b>(240, 100);
   ASSERT_NEAR(ColourFeature::chroma(mp[0], mp[1], mp[2]), 0.7 * t, 2.0);
-  EXPECT_TRUE(stripContrastFullRes(mirror, c, sp, 0.f));
+  EXPECT_TRUE(stripContrastFullRes(mirror, c, sp));
   StripSearchParams strict = sp;
   strict.max_full_res_ratio_matte = strict.max_full_res_ratio;
-  EXPECT_FALSE(stripContrastFullRes(mirror, c, strict, 0.f));
-  EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp, 0.f), cv::Exception);
+  EXPECT_FALSE(stripContrastFullRes(mirror, c, strict));
+  EXPECT_THROW(stripContrastFullRes(cv::Mat(480, 640, CV_8UC1), c, sp), cv::Exception);
 }
 
 // The tissue's level beside a line is an upper quantile of its samples, not their median: a grey
@@ -318,19 +318,19 @@ TEST(StripSearch, FullResolutionContrastAllowsABlobAlongPartOfASide) {
   cv::Mat gauze = img.clone();
   gauze(cv::Rect(0, 160, 240, 60)).setTo(cv::Scalar(150, 150, 152));  // above the shaft, 60 % of its length
   StripSearchParams sp;
-  EXPECT_TRUE(stripContrastFullRes(gauze, c, sp, 0.f));
+  EXPECT_TRUE(stripContrastFullRes(gauze, c, sp));
   StripSearchParams median = sp;
   median.full_res_outside_quantile = 0.5;
-  EXPECT_FALSE(stripContrastFullRes(gauze, c, median, 0.f)) << "the blob does not veto the median: no test";
+  EXPECT_FALSE(stripContrastFullRes(gauze, c, median)) << "the blob does not veto the median: no test";
   cv::Mat pale(480, 640, CV_8UC3, cv::Scalar(140, 141, 144));  // pale tissue, as grey as the strip: a fold
   pale(cv::Rect(0, 220, 400, 41)).setTo(cv::Scalar(120, 120, 125));
-  EXPECT_FALSE(stripContrastFullRes(pale, c, sp, 0.f));
+  EXPECT_FALSE(stripContrastFullRes(pale, c, sp));
   // Out-of-range quantiles are clamped: 0 (the least chromatic sample) and 1 (the most).
   StripSearchParams lo = sp, hi = sp;
   lo.full_res_outside_quantile = -1.0;
   hi.full_res_outside_quantile = 2.0;
-  EXPECT_FALSE(stripContrastFullRes(gauze, c, lo, 0.f));
-  EXPECT_TRUE(stripContrastFullRes(gauze, c, hi, 0.f));
+  EXPECT_FALSE(stripContrastFullRes(gauze, c, lo));
+  EXPECT_TRUE(stripContrastFullRes(gauze, c, hi));
 }
 
 // The SIMD walk (four rays per step) gives every ray exactly the scalar walk's score and length:

@@ -444,16 +444,22 @@ TEST_F(Graph, DynamicReconfigureTakesTheBreathingPeriod) {
   EXPECT_EQ(set(4.0), 4.0);
 }
 
-// The opt-in brightness fallback of the contour lines (segmentation/brightness_fallback_contrast)
-// is tunable at run time like the other edge thresholds; out-of-range values are clamped.
-TEST_F(Graph, DynamicReconfigureTakesTheBrightnessFallback) {
+// A live threshold is tunable at run time within its table range (out-of-range values are
+// clamped to it), and the server starts from the loaded value, not a .cfg default.
+TEST_F(Graph, DynamicReconfigureTakesTheGlareFraction) {
   ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
-  auto set = [](double contrast) {
-    return setParameter("endoscope/segmentation", "brightness_fallback_contrast", contrast, &dynamic_reconfigure::Config::doubles);
+  dynamic_reconfigure::Reconfigure current;  // (an empty request reports the current values)
+  ASSERT_TRUE(callService("endoscope/segmentation/set_parameters", current));
+  double start = -1.0;
+  for (auto const& q : current.response.config.doubles)
+    if (q.name == "max_glare_fraction") start = q.value;
+  EXPECT_EQ(start, 0.6);  // pipeline.test's value (the default: 0.5)
+  auto set = [](double fraction) {
+    return setParameter("endoscope/segmentation", "max_glare_fraction", fraction, &dynamic_reconfigure::Config::doubles);
   };
-  EXPECT_EQ(set(8.0), 8.0);
+  EXPECT_EQ(set(0.3), 0.3);
   EXPECT_EQ(set(-3.0), 0.0);
-  EXPECT_EQ(set(0.0), 0.0);
+  EXPECT_EQ(set(0.6), 0.6);
 }
 
 // Services: freeze keeps a trocar where it is; reset forgets them.

@@ -20,8 +20,7 @@ namespace endo_guidance::geometry {
 /// (Σ_L^+: the pseudo-inverse of the measured axis's rank-4 covariance) by Gauss-Newton over the
 /// 5 parameters (2 for d in the tangent plane of d̂, 3 for I), started at (d̂, Î). The result's
 /// covariance is the Gauss-Newton one propagated to (d, m). A short shaft's direction is then
-/// fixed by its trocar (`endo_guidance_eval_synthetic`, shafts attached to a located trocar:
-/// hard scene direction median 0.46 -> 0.23 deg, p95 3.6 -> 0.8 deg; clean 0.031 -> 0.011 deg).
+/// fixed by its trocar (docs/accuracy.md measures it).
 struct ConstrainedAxis {
   CylinderPose pose;              ///< the fused axis (d: entry -> tip, as measured), covariance of (d, m)
   Eigen::Vector3d pivot = Eigen::Vector3d::Zero();  ///< the fused insertion point of this frame, metres

@@ -30,10 +30,8 @@ struct InsertionPointTrackerOptions {
   std::size_t min_views = 10;        ///< axes needed before the first estimate
   double min_conditioning = 0.035;   ///< rad (2 deg): below, the estimate is flagged ill-conditioned
   double max_sigma = 0.005;          ///< metres: a well-conditioned point is located (located()) once its
-                                     ///< covariance's longest axis (1 sigma) is at most this (0: at once).
-                                     ///< Hard rendered scene: points located from frames 135-290, at most
-                                     ///< 2.1 mm off once located (19.6 mm while only well conditioned);
-                                     ///< clean: from frames 28-45
+                                     ///< covariance's longest axis (1 sigma) is at most this (0: at once):
+                                     ///< well conditioned alone can still be centimetres off
   double default_axis_sigma = 0.001; ///< metres: assumed distance noise of an axis given without covariance
   double point_motion_sigma = 0.001; ///< metres: RMS motion of the trocar itself (breathing), added to
                                      ///< every axis's residual covariance
@@ -45,9 +43,8 @@ struct InsertionPointTrackerOptions {
   int reweight_iterations = 3;       ///< Gauss-Markov reweighting passes when (re)initialising
   std::size_t correlation_views = 10; ///< axes per block of the cluster-robust covariance (0: the model
                                      ///< covariance alone): consecutive axes of one shaft share their
-                                     ///< errors (compression, breathing), so the model covariance, which
-                                     ///< takes them as independent, was 3-7x too small in the hard
-                                     ///< rendered scene (Mahalanobis distance of the true mean, median 2.8-4.4)
+                                     ///< errors (compression, breathing), which the model covariance,
+                                     ///< taking them as independent, underestimates several-fold
   double breathing_period = 4.0;     ///< s (0: off): the trocar's own motion is shared by the axes of a
                                      ///< breathing cycle, so the covariance along the mean axis is at least
                                      ///< min(rms, point_motion_sigma) / spread per cycle seen (the time the

@@ -21,10 +21,9 @@ struct ColourFeatureParams {
 /// \f[ \mathcal{H} = S_c \cdot w(h),\qquad S_c = \max(R,G,B) - \min(R,G,B),\qquad
 ///     w(h) = \frac{(h - h_0) \bmod 360}{180} \in [0, 2) \f]
 /// The saturation is measured as HSV chroma (S*V) rather than S = C/V: on dark pixels (black
-/// insulated shafts, vignetting) S = C/V is noise and often high, the chroma is low. Measured on
-/// the 80 EndoVis'15 in-vivo stills, per pixel, shaft vs tissue: AUC 0.945 for this feature,
-/// 0.94 for C alone, 0.88 for S*H. Specular highlights (white: C ~ 0) are low too; they are
-/// rejected later by shape, not colour.
+/// insulated shafts, vignetting) S = C/V is noise and often high, the chroma is low (per-pixel
+/// AUCs: docs/accuracy.md). Specular highlights (white: C ~ 0) are low too; they are rejected
+/// later by shape, not colour.
 class ColourFeature {
  public:
   explicit ColourFeature(ColourFeatureParams const& params = {});

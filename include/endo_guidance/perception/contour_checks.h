@@ -16,14 +16,12 @@ namespace endo_guidance::perception {
 /// Full-resolution colour samples across a contour, at 39 stations evenly spaced from its entry
 /// to its tip: three between the lines (at 1/4, 1/2 and 3/4 of the width) and one beside each
 /// line, a third of the width (at least 3 px) outside it. Samples off the image are left out.
-/// The samples are of edgeChannel() with the red-green weight given (the contour's own
-/// ContourLinesParams::edge_red_green_weight; 0: the chroma max - min).
 struct AcrossSamples {
   std::vector<float> inside;                  ///< edgeChannel() between the lines
   std::array<std::vector<float>, 2> outside;  ///< ... beside lines[0] and lines[1]
   int glare = 0;  ///< inside samples that are glare: near white (max channel >= 230) and achromatic (chroma < 30)
 };
-AcrossSamples acrossContour(cv::Mat const& bgr, geometry::ApparentContour const& contour, float red_green_weight);
+AcrossSamples acrossContour(cv::Mat const& bgr, geometry::ApparentContour const& contour);
 
 /// Whether the contour is mostly glare between its lines (AcrossSamples::glare over the inside
 /// samples > max_glare_fraction): a specular reflection on wet tissue, which the S.H feature

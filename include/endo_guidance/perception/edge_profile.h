@@ -12,17 +12,17 @@
 
 namespace endo_guidance::perception {
 
-/// Scale of the red-green opponent term of edgeChannel(): pure red keeps the feature's weight
-/// (w(0 deg) = 4/3, colour_feature.h).
-constexpr float kRedGreenScale = 4.0f / 3.0f;
 /// The channel in which the contour lines are located with sub-pixel precision (steepest descent
-/// from tissue into the shaft): E = (1 - w) (max - min) + w k (R - G), k = kRedGreenScale.
-/// The chroma separates grey and black shafts from saturated tissue but is rectified (noise moves
-/// the edge outward) and high on metal mirroring fat; the red-green term is linear in the colour
-/// and high on red and pink tissue only (docs/known-limits.md: the opt-in edge channel).
-inline float edgeChannel(float b, float g, float r, float w) {
-  return (1.f - w) * ColourFeature::chroma(b, g, r) + (w * kRedGreenScale) * (r - g);
-}
+/// from tissue into the shaft): the chroma max - min, which separates grey and black shafts from
+/// saturated tissue.
+inline float edgeChannel(float b, float g, float r) { return ColourFeature::chroma(b, g, r); }
+
+/// The edge channel at a + i d, i = 0..count-1, bilinear, every sample inside the image: the
+/// profiles' sampler, eight samples per step with AVX2 (chosen at run time, with OpenCV's
+/// optimisations on), else one per SSE2 step; identical to edgeChannel() of the bilinear colour,
+/// which `reference` computes one sample at a time.
+void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out,
+                       bool reference = false);
 
 /// The edges found on the profiles across `line` at t0 + j step along it (nullopt: no edge on
 /// that profile), with the parameters of widePass().

@@ -31,31 +31,20 @@ struct SegmentationParams {
   int strip_search_max_every = 30; ///< its strip search (the costliest step) less and less often: the
                                    ///< interval doubles, up to this, while the strip search keeps failing
   /// ... and its full search too: the interval doubles per full search that gives no shaft, up to
-  /// this (5: every full_search_every frames). Beyond full_search_every frames its region, grown
-  /// again at its level to claim it, must stay within refused_area_change of its area at the last
-  /// full search, and its run keep its width: else it is searched in full at once (something
-  /// entered or left). Robotic Dataset 2: 4.5x -> 3.2x an HSV conversion, its false shafts 0.07
-  /// -> 0.03 per frame (tissue creases accepted at some of their full searches); every other
-  /// evaluation unchanged (0.2 and 0.5 lost one shaft of the hard rendered scene, docs/performance.md).
+  /// this. Between full searches its region, grown again at its level, must stay within
+  /// refused_area_change of its area at the last one and its run keep its width, else it is
+  /// searched in full at once (something entered or left).
   int full_search_max_every = 20;
   double refused_area_change = 0.3;  ///< fraction of the larger area (see full_search_max_every)
-  /// A shaft's sides sought again after the first pair had no edges (fitSides() SideSearch), or
-  /// from a region another seed grew, must enter the view at least this steeply: the sine of
-  /// the angle between the axis and the border where it leaves the view (as
-  /// ContourLinesParams::min_entry_sine, for these only). Clean rendered scene: 0.1 let a stretch
-  /// of a shaft lying along the bottom border through (0.007 -> 0.013 false per frame).
+  /// Sides sought again (the first pair had no edges, or from a region another seed grew) must
+  /// enter the view at least this steeply: the sine of the angle between the axis and the border
+  /// (ContourLinesParams::min_entry_sine, stricter for these, which are more often tissue).
   double resought_min_entry_sine = 0.3;
-  /// ... and end inside the view: the tip at least this far (processing px) from the field of
-  /// view's edge. A band across a corner of the view has both ends on its border (robotic
-  /// Dataset 2's bottom-left corner: 0.11 -> 0.14 false per frame with 0, once the pairs that are
-  /// not near-parallel were sought again).
+  /// ... and end inside the view, the tip at least this far (processing px) from its edge: a band
+  /// across a corner of the view has both ends on the border.
   double resought_min_tip_depth_px = 6.0;
-  /// ... and widen toward the tip at most this much (width at the tip over width at the entry;
-  /// ContourLinesParams::max_widening, 2, for the others). A shaft widens toward its tip only
-  /// when it points toward the camera; a re-sought side can be a neighbour's edge (hard scene
-  /// frame 283: the right shaft's lower side taken from the left instrument's touching jaws,
-  /// 1.85x wider at the tip; the crossing seeds' false pairs, blobs beside a shaft, 1.9x).
-  /// The real data's re-sought and crossing shafts found are unchanged down to 1.25.
+  /// ... and widen toward the tip at most this much (ContourLinesParams::max_widening for the
+  /// others): a re-sought side can be a neighbour's edge.
   double resought_max_widening = 1.5;
   /// Seeds also on the edge of an accepted shaft that a refused region touches: a shaft crossing
   /// (or touching) it is cut by its strip, and the part beyond does not reach the field-of-view
@@ -121,7 +110,6 @@ class InstrumentSegmenter {
   cv::Mat const& labels() const { return labels_; }
 
  private:
-  float edgeWeight() const { return static_cast<float>(params_.contours.edge_red_green_weight); }
   SegmentationParams params_;
   ColourFeature colour_;
   FieldOfView fov_;
@@ -179,9 +167,8 @@ class InstrumentSegmenter {
 /// (on its axis) within half that shaft's width (at its entry) of that shaft's axis, so that it
 /// lies inside that shaft's image or its extension, and its axis within kDuplicateMaxAngleDeg
 /// of that one. Two instruments side by side have axes a width apart; one crossing another
-/// leaves the other's strip. The angle bound was 5 deg: hard scene frame 299's left shaft,
-/// found beyond the gauze from the gauze's seed, was found again from its own border entry, a
-/// short stub merged with the gauze, 6 deg off, and reported as a second instrument.
+/// leaves the other's strip. The angle allows for a short stub of the same shaft merged with a
+/// blob, a few degrees off.
 inline constexpr double kDuplicateMaxAngleDeg = 15.0;
 bool duplicatesAShaft(geometry::ApparentContour const& c, std::vector<geometry::ApparentContour> const& found);
 
@@ -196,15 +183,13 @@ std::vector<std::size_t> narrowerDuplicates(std::vector<geometry::ApparentContou
 /// square, touching ones an edge. Two contours whose quadrilaterals (between their lines, from
 /// the feet of the entry to those of the tip) overlap by more than this fraction of their union
 /// (intersection over union, as in a detector's non-maximum suppression) are one shaft seen
-/// twice, or a shaft and a wedge between one of its edges and a tissue edge (in-vivo
-/// OP2/img_34: 0.47, a strip from a seed beside a shaft found first). A 30 px shaft crossing an
-/// 80 px one at 30 deg, over half of it on the other: 0.17.
+/// twice, or a shaft and a wedge between one of its edges and a tissue edge. A 30 px shaft
+/// crossing an 80 px one at 30 deg, over half of it on the other, overlaps by 0.17.
 inline constexpr double kMaxShaftOverlap = 1.0 / 3.0;
 /// The contours of `found` that overlap (kMaxShaftOverlap) one with a smaller RMS line residual
 /// (ApparentContour::residual_px; at equal residuals the earlier one is kept), ascending: the
-/// contours are kept in order of residual, each unless it overlaps one kept before it. The
-/// wedge's tissue line fits its edge points worse (0.56 against 0.32 px; in-vivo OP2/img_03 the
-/// whole shaft 0.34 against a strip inside it 0.40, which narrowerDuplicates() drops first).
+/// contours are kept in order of residual, each unless it overlaps one kept before it: a wedge's
+/// tissue line fits its edge points worse than a shaft's edge does.
 std::vector<std::size_t> overlappingDuplicates(std::vector<geometry::ApparentContour> const& found);
 
 /// Draws contours, axes, tips, entries and the directions of the insertion points on a BGR image

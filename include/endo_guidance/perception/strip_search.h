@@ -37,16 +37,13 @@ struct StripSearchParams {
   /// ... the tissue's level beside a line: this quantile of its samples. Not the median: a shaft
   /// beside a grey blob (gauze, another shaft, a metal sleeve) along half a side is still less
   /// chromatic than the tissue along the rest of that side; a pale fold's surroundings are pale
-  /// throughout (robotic DS1: 146 -> 160 of 160 shafts found; in-vivo 76 -> 78 of 98).
+  /// throughout.
   double full_res_outside_quantile = 0.75;
   double max_refine_shift = 3.0;  ///< processing px: the sub-pixel lines stay this close to the strip's sides at both ends
   /// full-res px: a strip whose sub-pixel lines left it (stripAgrees()) is refined again with the
   /// wide pass's half-width (ContourLinesParams::coarse_halfwidth_px, 9 px) 1 px narrower at a
-  /// time, down to this, until they stay on it (refineStrip(); 0: no retry). In-vivo 78 -> 81 of
-  /// 98 shafts found with no more false ones: OP2/img_20 and img_24 (lines 0.4 and 2.1 px from
-  /// the mask's sides; the wide pass had locked onto a tissue edge beyond the shaft's) and
-  /// OP1/img_06's black shaft (5.2 px: its lower edge against shadowed tissue). One narrower
-  /// pass instead (5 px) found the first two, 4, 4.5, 5.5 or 6 px only img_24.
+  /// time, down to this, until they stay on it (refineStrip(); 0: no retry): the wide pass may
+  /// lock onto a steeper tissue edge beyond a weak shaft edge.
   double retry_min_halfwidth_px = 3.0;
 };
 
@@ -126,9 +123,8 @@ ContourFit refineStrip(StripCandidate const& strip, FieldOfView const& fov, cv::
 /// (white dots between red pixels) averages to a grey strip; at full resolution most of it is
 /// tissue and many of its samples are white. Metal mirroring the tissue is weakly contrasted but
 /// matte.
-/// Samples of edgeChannel() with the red-green weight given (acrossContour()).
-bool stripContrastFullRes(cv::Mat const& bgr, geometry::ApparentContour const& contour, StripSearchParams const& params,
-                          float red_green_weight);
+/// Samples of edgeChannel() (acrossContour()).
+bool stripContrastFullRes(cv::Mat const& bgr, geometry::ApparentContour const& contour, StripSearchParams const& params);
 /// The same from samples already taken (acrossContour()).
 bool stripContrastFullRes(AcrossSamples samples, StripSearchParams const& params);
 

@@ -60,9 +60,33 @@ struct PipelineOutput {
   double latency_ms = 0.0;
 };
 
+/// The per-frame stages, called alike by Pipeline::process() and by the nodelets (one stage each).
+///
+/// Stage 1 ([Doignon07] Sec. 3): the frame's shafts, the seed search focused by the trocars'
+/// images, as contours in rectified pixels (each refitted to its rectified edge points when
+/// `rectify` is set: the image is never remapped; one that cannot be is dropped), each with its
+/// track id. `result`: the segmentation's own output (image pixels: overlays, diagnostics).
+std::vector<geometry::ApparentContour> segmentShafts(perception::InstrumentSegmenter& segmenter, geometry::ShaftTracker& tracker,
+                                                     cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocar_images,
+                                                     perception::PointRectifier const& rectify,
+                                                     perception::ContourLinesParams const& contour_params,
+                                                     perception::SegmentationResult& result);
+/// Stage 2 ([Doignon07] Eqs. (7)-(13)): a shaft's axis from its contour, and its tip pixel
+/// back-projected onto it; nullopt for degenerate geometry (flagged, not guessed).
+struct ShaftPose {
+  geometry::CylinderPose pose;
+  std::optional<Eigen::Vector3d> tip_c;
+};
+std::optional<ShaftPose> shaftPose(Eigen::Matrix3d const& K, double radius, geometry::ApparentContour const& contour,
+                                   geometry::CylinderPoseOptions const& options);
+
 /// The insertion-point options with `admissible` set (unless given) to "outside the image of
 /// size `size` seen through K, or behind the camera": a trocar is in the abdominal wall.
 geometry::InsertionPointSetOptions outOfViewOptions(geometry::InsertionPointSetOptions options, Eigen::Matrix3d const& K, cv::Size size);
+/// Stage 3 ([Doignon07] Eqs. (3)-(6)), in the functions below: the images of the trocars for
+/// stage 1, each axis attached (attachAxis()), the points reported, each attached axis through
+/// its located point.
+///
 /// Homogeneous images of the well-conditioned insertion points (they focus the seed search,
 /// [Doignon07] Sec. 4) and their ids.
 void wellConditionedImages(geometry::InsertionPointSet const& set, Eigen::Matrix3d const& K, std::vector<Eigen::Vector3d>* images,

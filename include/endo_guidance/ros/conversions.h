@@ -58,13 +58,4 @@ bool toMsg(pipeline::InsertionPointReport const& r, endo_guidance::InsertionPoin
 std::vector<std::string> loadPipelineParams(ros::NodeHandle const& nh, pipeline::PipelineParams& params,
                                             std::vector<std::string> const& own = {});
 
-/// Whether `key` is one of the flat names dynamic_reconfigure's server for `Config` mirrors into
-/// the node's namespace: found there again after a respawn, and not an unknown key.
-template <class Config>
-bool isReconfigureMirror(std::string const& key) {
-  for (auto const& d : Config::__getParamDescriptions__())
-    if (d->name == key) return true;
-  return false;
-}
-
 }  // namespace endo_guidance::ros_io

@@ -42,6 +42,10 @@ class SceneRenderer {
   /// `labels` (optional): per pixel 0 background, 1 shaft, 2 jaws (CV_8U; a pixel is the nearest
   /// instrument's part covering at least half of it, inside the field of view): exact training labels.
   cv::Mat render(std::vector<SyntheticView> const& views, int k = 0, cv::Mat* labels = nullptr) const;
+  /// The same into `out` (CV_8UC3 of the renderer's size: kept when it is, e.g. a header over a
+  /// message's buffer), with `scratch` as the float working image: a stream reuses both, so no
+  /// frame-sized block is allocated per frame.
+  void render(std::vector<SyntheticView> const& views, int k, cv::Mat& out, cv::Mat& scratch, cv::Mat* labels = nullptr) const;
   RenderOptions const& options() const { return options_; }
   /// Coverage of the field of view (CV_32F, 1 inside, 0 outside, vignetting included).
   cv::Mat const& fieldOfView() const { return fov_; }
