@@ -122,15 +122,13 @@ TEST(ContourLines, SubpixelEdgeIsNotPulledByTheTissueTexture) {
   EXPECT_LT(std::abs(lobe), 0.6 * std::abs(window)) << "lobe " << lobe << " window " << window;  // (measured -0.025)
 }
 
-// edgeChannel(): the chroma max - min at w = 0, exactly; the red-green opponent 4/3 (R - G) at w = 1.
-TEST(ContourLines, EdgeChannelMixesChromaAndRedGreen) {
+// edgeChannel(): the chroma max - min, exactly.
+TEST(ContourLines, EdgeChannelIsTheChroma) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> U(0.f, 255.f);
   for (int i = 0; i < 1000; ++i) {
     float const b = U(rng), g = U(rng), r = U(rng);
-    EXPECT_EQ(edgeChannel(b, g, r, 0.f), ColourFeature::chroma(b, g, r));
-    EXPECT_NEAR(edgeChannel(b, g, r, 1.f), 4.f / 3.f * (r - g), 1e-3);
-    EXPECT_NEAR(edgeChannel(b, g, r, 0.3f), 0.7f * ColourFeature::chroma(b, g, r) + 0.4f * (r - g), 1e-3);
+    EXPECT_EQ(edgeChannel(b, g, r), ColourFeature::chroma(b, g, r));
   }
 }
 
@@ -311,30 +309,26 @@ TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
   // A grey shaft with one highlight streak along it (a sixth of its width): a shaft.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
   cv::rectangle(img, cv::Point(117, 0), cv::Point(123, 239), cv::Scalar(250, 250, 250), cv::FILLED);
-  AcrossSamples s = acrossContour(img, c, 0.f);
+  AcrossSamples s = acrossContour(img, c);
   EXPECT_EQ(s.inside.size(), 39u * 3u);
   EXPECT_EQ(s.outside[0].size(), 39u);
   EXPECT_EQ(s.outside[1].size(), 39u);
   EXPECT_EQ(s.glare, 39);  // the middle samples only
   EXPECT_NEAR(s.outside[0].front(), 110.f, 1e-3);  // chroma of the tissue beside the left line
-  // With the red-green term: (1 - w) 110 + w 4/3 (170 - 70); the glare count is the chroma's.
-  AcrossSamples const sw = acrossContour(img, c, 0.3f);
-  EXPECT_NEAR(sw.outside[0].front(), 0.7f * 110.f + 0.3f * (4.f / 3.f) * 100.f, 1e-3);
-  EXPECT_EQ(sw.glare, 39);
   EXPECT_FALSE(mostlyGlare(img, c, p));
   // A white reflection filling the strip: glare.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(245, 250, 252), cv::FILLED);
-  s = acrossContour(img, c, 0.f);
+  s = acrossContour(img, c);
   EXPECT_EQ(s.glare, 39 * 3);
   EXPECT_TRUE(mostlyGlare(img, c, p));
   // Bright but coloured (pale pink tissue, chroma >= 30) is not glare; nor is white on half the
   // samples or fewer.
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(200, 205, 245), cv::FILLED);
-  EXPECT_EQ(acrossContour(img, c, 0.f).glare, 0);
+  EXPECT_EQ(acrossContour(img, c).glare, 0);
   EXPECT_FALSE(mostlyGlare(img, c, p));
   cv::rectangle(img, cv::Point(100, 0), cv::Point(140, 239), cv::Scalar(110, 110, 110), cv::FILLED);
   cv::rectangle(img, cv::Point(100, 160), cv::Point(140, 239), cv::Scalar(250, 250, 250), cv::FILLED);  // toward the entry
-  s = acrossContour(img, c, 0.f);
+  s = acrossContour(img, c);
   EXPECT_GT(s.glare, 0);
   EXPECT_LE(s.glare, static_cast<int>(0.5 * s.inside.size()));
   EXPECT_FALSE(mostlyGlare(img, c, p));
@@ -344,7 +338,7 @@ TEST(ContourLines, GlareBetweenTheLinesIsNotAShaft) {
   // Samples off the image are left out (a strip reaching past the border).
   ApparentContour off = c;
   off.tip_px = Eigen::Vector2d(120.0, -100.0);
-  EXPECT_LT(acrossContour(img, off, 0.f).inside.size(), 39u * 3u);
+  EXPECT_LT(acrossContour(img, off).inside.size(), 39u * 3u);
 }
 
 // Grey shaft right of the exact line x = 40.3 + 0.1 y on red tissue (area coverage), over rows
