@@ -7,10 +7,37 @@
 #include <cmath>
 
 namespace endo_guidance::geometry {
+namespace {
+
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+
+// Whitening of the measured axis: Sigma_L^{+1/2} over its rank-4 support (the two gauge
+// directions, |d| and d.m, carry no information and have ~zero variance). nullopt: no support.
+std::optional<Mat6> axisWhitening(Mat6 const& covariance) {
+  Eigen::SelfAdjointEigenSolver<Mat6> es(0.5 * (covariance + covariance.transpose()));
+  double const top = es.eigenvalues().maxCoeff();
+  if (!(top > 0.0)) return std::nullopt;
+  Mat6 W = Mat6::Zero();
+  for (int i = 0; i < 6; ++i) {
+    double const l = es.eigenvalues()(i);
+    if (l > 1e-9 * top) W += es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose() / std::sqrt(l);
+  }
+  return W;
+}
+
+// Whitening of the point: (Sigma_I + sigma_b^2 1)^{-1/2}. nullopt: not positive definite.
+std::optional<Eigen::Matrix3d> pointWhitening(Eigen::Matrix3d const& covariance, double motion_sigma) {
+  Eigen::Matrix3d const SI =
+      0.5 * (covariance + covariance.transpose()) + motion_sigma * motion_sigma * Eigen::Matrix3d::Identity();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ei(SI);
+  if (!(ei.eigenvalues().minCoeff() > 0.0)) return std::nullopt;
+  return Eigen::Matrix3d(ei.operatorInverseSqrt());
+}
+
+}  // namespace
 
 std::optional<ConstrainedAxis> constrainAxisToPoint(CylinderPose const& measured, Eigen::Vector3d const& point,
                                                     Eigen::Matrix3d const& point_covariance, double point_motion_sigma) {
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
   using Vec6 = Eigen::Matrix<double, 6, 1>;
   using Mat65 = Eigen::Matrix<double, 6, 5>;
   using Mat5 = Eigen::Matrix<double, 5, 5>;
@@ -19,22 +46,11 @@ std::optional<ConstrainedAxis> constrainAxisToPoint(CylinderPose const& measured
   if (!measured.covariance.allFinite() || !(measured.covariance.norm() > 0.0) || !point.allFinite() ||
       !point_covariance.allFinite() || !std::isfinite(point_motion_sigma) || !d_hat.allFinite() || !m_hat.allFinite())
     return std::nullopt;
-  // Whitening of the measured axis: Sigma_L^{+1/2} over its rank-4 support (the two gauge
-  // directions, |d| and d.m, carry no information and have ~zero variance).
-  Eigen::SelfAdjointEigenSolver<Mat6> es(0.5 * (measured.covariance + measured.covariance.transpose()));
-  double const top = es.eigenvalues().maxCoeff();
-  if (!(top > 0.0)) return std::nullopt;
-  Mat6 W = Mat6::Zero();
-  for (int i = 0; i < 6; ++i) {
-    double const l = es.eigenvalues()(i);
-    if (l > 1e-9 * top) W += es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose() / std::sqrt(l);
-  }
-  // Whitening of the point: (Sigma_I + sigma_b^2 1)^{-1/2}.
-  Eigen::Matrix3d const SI = 0.5 * (point_covariance + point_covariance.transpose()) +
-                             point_motion_sigma * point_motion_sigma * Eigen::Matrix3d::Identity();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ei(SI);
-  if (!(ei.eigenvalues().minCoeff() > 0.0)) return std::nullopt;
-  Eigen::Matrix3d const WI = ei.operatorInverseSqrt();
+  auto const W_opt = axisWhitening(measured.covariance);
+  auto const WI_opt = pointWhitening(point_covariance, point_motion_sigma);
+  if (!W_opt || !WI_opt) return std::nullopt;
+  Mat6 const& W = *W_opt;
+  Eigen::Matrix3d const& WI = *WI_opt;
   Vec6 L_hat;
   L_hat << d_hat, m_hat;
   Eigen::Vector3d d = d_hat, I = point;
