@@ -18,6 +18,7 @@
 
 #include "endo_guidance/perception/colour_feature.h"
 #include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/perception/learned_shaft_detector.h"
 #include "endo_guidance/perception/sigma_filter.h"
 #include "endo_guidance/perception/strip_search.h"
 #include "endo_guidance/pipeline/pipeline.h"

@@ -315,4 +315,69 @@ bool agreesWithMask(geometry::ApparentContour const& c, SideFit const& sides, do
   return std::min(straight, crossed) <= gate_px;
 }
 
+
+namespace {
+// One mask component's contour: the lines on the frame's edges where they are the mask's sides,
+// else on the mask's sides; kNone in its rejection when accepted.
+ContourFit fitComponent(Region const& region, DetectionFrame const& frame, ContourLinesParams const& p, double gate_px,
+                        double mask_floor_px, std::vector<geometry::ApparentContour> const& found) {
+  SideFit const sides = maskSides(region, frame.fov, frame.scale, p);
+  if (sides.rejection != ContourRejection::kNone) {
+    ContourFit none;
+    none.rejection = sides.rejection;
+    return none;
+  }
+  ContourFit f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
+  if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) f = maskContour(sides, region, frame.scale, p, mask_floor_px);
+  if (f.contour && mostlyGlare(frame.bgr, *f.contour, p)) f.rejection = ContourRejection::kGlare;
+  else if (f.contour && duplicatesAShaft(*f.contour, found)) f.rejection = ContourRejection::kDuplicate;
+  if (f.rejection != ContourRejection::kNone) f.contour.reset();
+  return f;
+}
+
+// The network for p: `current` when it is still the one p asks for.
+std::shared_ptr<ShaftNet> networkFor(SegmentationParams const& p, SegmentationParams const& old, std::shared_ptr<ShaftNet> current) {
+  if (current && p.learned.model == old.learned.model && p.learned.threads == old.learned.threads) return current;
+  return std::make_shared<ShaftNet>(p.learned.model, p.learned.threads);
+}
+}  // namespace
+
+LearnedShaftDetector::LearnedShaftDetector(SegmentationParams const& params)
+    : params_(params), net_(networkFor(params, params, nullptr)) {}
+
+void LearnedShaftDetector::setParams(SegmentationParams const& p) {
+  net_ = networkFor(p, params_, net_);  // (throws before anything changed)
+  params_ = p;
+}
+
+SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
+  SegmentationResult res;
+  res.scale = frame.scale;
+  cv::Mat const prob = net_->shaftProbability(frame.bgr);
+  cv::Mat p;  // at the processing scale
+  cv::resize(prob, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  res.regions = proposeShaftRegions(p, frame.fov, params_.regions.min_area, params_.contours.border_margin);
+  labels_ = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
+  // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its
+  // pixels from it is another edge; a line on the mask's side has its pixel's quantisation
+  // error (pixel / sqrt(12)) as the systematic floor of its covariance.
+  double const net_px = static_cast<double>(frame.bgr.cols) / prob.cols;
+  double const mask_floor_px = std::max(params_.contours.line_sigma_floor_px, net_px / std::sqrt(12.0));
+  for (std::size_t ri = 0; ri < res.regions.size() && static_cast<int>(res.contours.size()) < params_.regions.max_regions; ++ri) {
+    ContourFit const f = fitComponent(res.regions[ri], frame, params_.contours, 1.5 * net_px, mask_floor_px, res.contours);
+    res.region_status.push_back(f.rejection);
+    if (!f.contour) continue;
+    res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)
+    res.edges.push_back(f.edges);
+    res.contour_regions.push_back(ri);
+    cv::drawContours(labels_, std::vector<std::vector<cv::Point>>{res.regions[ri].boundary}, 0,
+                     cv::Scalar(static_cast<int>(res.contours.size())), cv::FILLED);
+  }
+  res.regions.resize(res.region_status.size());  // (those beyond max_regions were not fitted)
+  std::vector<std::size_t> none;
+  removeDuplicateShafts(res, none);
+  p.convertTo(feature_, CV_8U, -255.0, 255.0);  // low on shafts, as the colour feature
+  return res;
+}
+
 }  // namespace endo_guidance::perception

@@ -2,143 +2,74 @@
 #include "endo_guidance/perception/segmentation.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstdint>
-#include <deque>
-#include <limits>
-#include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
+#include "endo_guidance/perception/colour_shaft_detector.h"
+#include "endo_guidance/perception/contour_checks.h"
 #include "endo_guidance/perception/image_reduction.h"
-#include "endo_guidance/perception/sigma_filter.h"
+#include "endo_guidance/perception/learned_shaft_detector.h"
 
 namespace endo_guidance::perception {
 
 namespace {
-// Whether seeds a and b (on the region's boundary) are joined by a stretch of the boundary that
-// runs along the field-of-view edge (no deeper inside than the seeds, plus `margin` px): the two
-// are one entry.
-bool onOneBorderRun(Region const& r, FieldOfView const& fov, cv::Point a, cv::Point b, int margin) {
-  auto const& B = r.boundary;
-  int const n = static_cast<int>(B.size());
-  if (n == 0) return false;
-  auto nearest = [&](cv::Point q) {
-    int bi = 0;
-    double bd = 1e300;
-    for (int i = 0; i < n; ++i)
-      if (double const d = cv::norm(B[i] - q); d < bd) {
-        bd = d;
-        bi = i;
-      }
-    return bi;
-  };
-  float const level = std::max(fov.depth.at<float>(a), fov.depth.at<float>(b)) + static_cast<float>(margin);
-  auto onBorder = [&](cv::Point q) { return fov.depth.at<float>(q) <= level; };
-  int const ia = nearest(a), ib = nearest(b);
-  for (int step : {1, -1}) {
-    bool run = true;
-    for (int i = ia; i != ib && run; i = ((i + step) % n + n) % n) run = onBorder(B[i]);
-    if (run) return true;
-  }
-  return false;
-}
-
-// Whether a shaft found from a crossing seed (entering the view at an accepted shaft, label
-// `occluder` in `labels`) continues on that shaft's other side, as a shaft passing under or over
-// it does: walking back along its image axis from the entry, the occluder's pixels are met within
-// a few px, and the 4 px beyond them are mostly (3 of 4) inside the view and at or below the
-// growth level. A blob or a jaw beside the occluder ends at it.
-bool continuesBeyond(geometry::ApparentContour const& c, cv::Mat const& labels, int occluder, cv::Mat const& feature, FieldOfView const& fov,
-                     int level, int scale) {
-  Eigen::Vector2d const d = (c.entry_px - c.tip_px).normalized();
-  Eigen::Vector2d const e = toProcessing(geometry::footOnLine(geometry::imageAxis(c), c.entry_px), scale);
-  auto pixel = [&](double t) {
-    Eigen::Vector2d const x = e + t * d;
-    return cv::Point(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
-  };
-  auto inside = [&](cv::Point q) { return q.x >= 0 && q.y >= 0 && q.x < labels.cols && q.y < labels.rows; };
-  int i = 0;
-  for (; i <= 6; ++i) {  // into the occluder
-    cv::Point const q = pixel(i);
-    if (!inside(q)) return false;
-    if (labels.at<std::uint8_t>(q) == occluder) break;
-  }
-  if (i > 6) return false;
-  for (int const end = i + 4 * std::max(labels.cols, labels.rows); i < end; ++i) {  // across it
-    cv::Point const q = pixel(i);
-    if (!inside(q)) return false;
-    if (labels.at<std::uint8_t>(q) != occluder) break;
-  }
-  int low = 0;
-  for (int k = 0; k < 4; ++k) {
-    cv::Point const q = pixel(i + k);
-    low += inside(q) && fov.mask.at<std::uint8_t>(q) && feature.at<std::uint8_t>(q) <= level;
-  }
-  return low >= 3;
-}
-}  // namespace
-
-namespace {
-// Instruments of one radius are about as wide where they cross, at about the same depth (a
-// crossing seed's false pair, jaws beside a shaft, is a fraction of its width).
-constexpr double kCrossingMinWidthRatio = 0.5;
-// A contour's width at its tip over its width at its entry.
-double widening(geometry::ApparentContour const& c) {
-  Eigen::Vector3d const e = c.entry_px.homogeneous(), t = c.tip_px.homogeneous();
-  return (c.lines[0].dot(t) + c.lines[1].dot(t)) / std::max(1e-9, c.lines[0].dot(e) + c.lines[1].dot(e));
-}
-// The strip an accepted shaft claims (processing px): between its lines widened by 2 px, from
-// 2 px before its entry to 2 px beyond its tip.
-std::vector<cv::Point> claimedStrip(geometry::ApparentContour const& c, int scale) {
-  std::vector<cv::Point> strip;
-  Eigen::Vector2d const ax = (c.tip_px - c.entry_px).normalized();
-  for (Eigen::Vector2d const& e : {Eigen::Vector2d(c.entry_px - 2.0 * scale * ax), Eigen::Vector2d(c.tip_px + 2.0 * scale * ax)})
-    for (int k = 0; k < 2; ++k) {
-      Eigen::Vector2d const n = c.lines[k].head<2>();
-      Eigen::Vector2d const f = geometry::footOnLine(c.lines[k], e) - n * (2.0 * scale);
-      Eigen::Vector2d const ps = toProcessing(f, scale);
-      strip.emplace_back(static_cast<int>(std::lround(ps.x())), static_cast<int>(std::lround(ps.y())));
-    }
-  std::swap(strip[2], strip[3]);
-  return strip;
-}
 // What the stages index or divide by (the YAML loader refuses these with the key's name).
 SegmentationParams const& checked(SegmentationParams const& p) {
   if (p.regions.thresholds.empty()) throw std::invalid_argument("segmentation: no growth thresholds");
   if (p.processing_width <= 0) throw std::invalid_argument("segmentation: processing_width must be positive");
   return p;
 }
-// The learned detector's network for p: `current` when it is still the one p asks for.
-std::shared_ptr<ShaftNet> networkFor(SegmentationParams const& p, SegmentationParams const& old, std::shared_ptr<ShaftNet> current) {
-  if (p.detector != SegmentationParams::Detector::kLearned) return nullptr;
-  if (current && p.learned.model == old.learned.model && p.learned.threads == old.learned.threads) return current;
-  return std::make_shared<ShaftNet>(p.learned.model, p.learned.threads);
-}
 }  // namespace
 
+std::unique_ptr<ShaftDetector> makeShaftDetector(SegmentationParams const& params) {
+  if (params.detector == SegmentationParams::Detector::kLearned) return std::make_unique<LearnedShaftDetector>(params);
+  return std::make_unique<ColourShaftDetector>(params);
+}
+
 InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params)
-    : params_(checked(params)), colour_(params.feature), net_(networkFor(params, params, nullptr)) {}
+    : params_(checked(params)), detector_(makeShaftDetector(params)) {}
+
+InstrumentSegmenter::InstrumentSegmenter(SegmentationParams const& params, std::unique_ptr<ShaftDetector> detector)
+    : params_(checked(params)), detector_(std::move(detector)) {
+  if (!detector_) throw std::invalid_argument("InstrumentSegmenter: null shaft detector");
+}
+
+InstrumentSegmenter::InstrumentSegmenter(InstrumentSegmenter const& o)
+    : params_(o.params_),
+      detector_(o.detector_->clone()),
+      fov_(o.fov_),
+      fov_size_(o.fov_size_),
+      fov_area_(o.fov_area_),
+      frames_since_fov_(o.frames_since_fov_),
+      tracked_(o.tracked_),
+      tracked_size_(o.tracked_size_),
+      scale_(o.scale_),
+      since_detection_(o.since_detection_),
+      small_(o.small_) {}
+
+InstrumentSegmenter& InstrumentSegmenter::operator=(InstrumentSegmenter const& o) {
+  if (this != &o) *this = InstrumentSegmenter(o);
+  return *this;
+}
+
+InstrumentSegmenter::~InstrumentSegmenter() = default;
 
 void InstrumentSegmenter::setParams(SegmentationParams const& p) {
   checked(p);
-  net_ = networkFor(p, params_, net_);
-  bool const new_colour = p.feature.hue_origin_deg != params_.feature.hue_origin_deg || p.feature.gain != params_.feature.gain;
+  if (p.detector != params_.detector) detector_ = makeShaftDetector(p);  // (throws before anything changed)
+  else detector_->setParams(p);
   params_ = p;
-  if (new_colour) colour_ = ColourFeature(p.feature);
   fov_size_ = cv::Size();  // re-detect
-  memory_.clear();         // its levels index the old threshold list
   tracked_.clear();
-  tracked_memory_.clear();
 }
 
 void InstrumentSegmenter::reset() {
   fov_size_ = cv::Size();
-  memory_.clear();
+  detector_->reset();
   tracked_.clear();
-  tracked_memory_.clear();
   since_detection_ = 0;
 }
 
@@ -166,10 +97,8 @@ std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr)
   // The seeds' memory follows the shafts, so that the next detection frame finds each shaft's
   // seed where its memory is (and tries its growth level first).
   for (std::size_t i = 0; i < now.size(); ++i) {
-    std::size_t const m = tracked_memory_[i];
-    if (m >= memory_.size()) continue;
     Eigen::Vector2d const shift = (now[i].contour.entry_px - tracked_[i].contour.entry_px) / scale_;
-    memory_[m].entry += cv::Point(static_cast<int>(std::lround(shift.x())), static_cast<int>(std::lround(shift.y())));
+    detector_->shaftMoved(i, cv::Point(static_cast<int>(std::lround(shift.x())), static_cast<int>(std::lround(shift.y()))));
   }
   SegmentationResult res;
   res.scale = scale_;
@@ -192,470 +121,16 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
                                std::min(bgr.rows, bgr.cols));
   reduceImage(bgr, scale, small_);  // (image_reduction.h)
   updateFieldOfView();
-  return net_ ? detectLearned(bgr, scale) : detectColour(bgr, trocars, scale);
+  SegmentationResult res = detector_->detect({bgr, small_, fov_, fov_area_, scale, trocars, since_detection_ + 1});
+  startTracks(res, detector_->followable(), bgr);
+  return res;
 }
 
-// One detection frame of the colour method: the feature, the seeds, and what the seeds' searches
-// share (the result so far, the new seed memory, the crossing seeds' views).
-struct InstrumentSegmenter::FrameSearch {
-  InstrumentSegmenter& S;
-  cv::Mat const& bgr;
-  int const scale;
-  int const elapsed;  // frames since the last detection frame: the ages of the seed memory count frames
-  SegmentationResult res;
-  std::vector<Memory> memory_now;
-  std::vector<std::size_t> contour_memory;  // per accepted contour: its seed's entry in memory_now
-  std::vector<std::size_t> contour_region;  // ... and its region's index in res.regions
-  bool all_confirmed = true;  // every shaft found was also found at the last detection (its seed's memory)
-  bool have_gradient = false;
-  double max_area = 0.0;
-  // The stricter checks of re-sought side pairs (SeedSearch::resought).
-  StripSearchParams resought_contrast;
-  ContourLinesParams resought_contours;
-  // Crossing seeds (addCrossingSeeds()): after the border's, seeds on the edge of an accepted shaft
-  // that hides part of another; each is searched in the field of view less that shaft's pixels.
-  int border_seeds = 0;
-  std::deque<FieldOfView> occluded;  // per occluding shaft searched (stable references)
-  std::vector<int> occluders;        // ... that shaft (index in res.contours)
-  std::vector<int> seed_view;        // per crossing seed: its field of view in `occluded`
-  std::vector<std::vector<cv::Point>> strips;  // per accepted contour: the strip it claimed (processing px)
-  std::vector<int> strip_labels;               // ... and its label in grower_.labels()
-
-  FrameSearch(InstrumentSegmenter& s, cv::Mat const& image, std::vector<Eigen::Vector3d> const& trocars, int sc)
-      : S(s), bgr(image), scale(sc), elapsed(s.since_detection_ + 1) {
-    res.scale = scale;
-    S.colour_.compute(S.small_, S.raw_);
-    sigmaFilter(S.raw_, S.filtered_, S.params_.sigma_radius, S.params_.sigma_delta);
-    // Trocar images in processing pixels (homogeneous: some lie at infinity).
-    std::vector<Eigen::Vector3d> t_small;
-    for (auto const& t : trocars) t_small.push_back(toProcessing(t, scale));
-    res.seeds = findSeeds(S.filtered_, S.fov_, S.params_.seeds, t_small);
-    S.grower_.reset(S.filtered_, S.fov_);
-    max_area = S.params_.regions.max_area_fraction * S.fov_area_;
-    resought_contrast = S.params_.strip;
-    resought_contrast.max_full_res_ratio_matte = resought_contrast.max_full_res_ratio;
-    resought_contours = S.params_.contours;
-    resought_contours.min_entry_sine = std::max(resought_contours.min_entry_sine, S.params_.resought_min_entry_sine);
-    border_seeds = static_cast<int>(res.seeds.size());
-  }
-  // Drops the contours `dup` (ascending) as duplicates; their seeds' memory stays a shaft's.
-  void drop(std::vector<std::size_t> const& dup) {
-    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
-      std::size_t const i = *it;
-      res.region_status[contour_region[i]] = ContourRejection::kDuplicate;
-      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(i));
-      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(i));
-      contour_memory.erase(contour_memory.begin() + static_cast<std::ptrdiff_t>(i));
-      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(i));
-    }
-  }
-  // A refused seed's run that is missing in this frame (a run near the seed threshold flickers)
-  // keeps its memory while a full or strip search of it would not be due yet: when the run is
-  // back it is not searched in full as a new seed.
-  void carryMemory() {
-    for (Memory const& m : S.memory_) {
-      if (m.accepted || (S.fullSearchDue(m, m.width, elapsed) && S.stripSearchDue(&m, m.width, elapsed))) continue;
-      bool const seen = std::any_of(memory_now.begin(), memory_now.end(),
-                                    [&](Memory const& n) { return entryDistance(n.entry, m.entry) <= S.params_.level_memory_px; });
-      if (seen) continue;
-      Memory c = m;
-      c.carried = true;
-      c.age += elapsed;
-      c.strip_age += elapsed;
-      memory_now.push_back(std::move(c));
-    }
-  }
-};
-
-// One seed's search: grow at each threshold level, score each level's straight-line pair cheaply
-// and refine the best in full until one is accepted; the strip search where every region leaked;
-// side pairs sought again where they had no edges. In a video, a seed near last frame's entry of a
-// shaft tries that shaft's level first and stops there if it scores as well as before; a seed near
-// last frame's refused region only re-grows it (to claim it) until a full search is due
-// (fullSearchDue(); its strip search: stripSearchDue()).
-struct InstrumentSegmenter::SeedSearch {
-  struct Candidate {
-    Region region;
-    SideFit sides;
-    double score;
-    int level;
-    bool resought = false;  // sides sought again (see reseek()) or from another seed's region
-  };
-  FrameSearch& F;
-  InstrumentSegmenter& S;
-  SegmentationParams const& P;
-  SegmentationResult& res;
-  int const si;
-  Seed const seed;
-  bool const crossing;
-  FieldOfView const& view;
-  bool in_refused = false;
-  int refused_region = -1;  // the refused region it lies in
-  std::vector<int> T;       // the growth levels' thresholds (growthLevels())
-  int strip_level = 0;
-  Memory const* mem = nullptr;
-  int mem_level = 0;  // last frame's level in this frame's list, which is longer on a dark border
-  std::optional<Region> best;
-  ContourFit best_fit;
-  int best_level = -1;
-  double best_score = 0.0;
-  bool best_parallel = false;
-  std::optional<StripCandidate> best_strip;
-  ContourRejection why = ContourRejection::kTooFewPoints;
-  bool strip_first = false, strip_run = false;
-  std::optional<Region> smallest;
-  int smallest_level = 0;
-  std::vector<int> tried;  // levels grown so far
-  // Candidates with a side found only as the stretch parallel to the other (fitSides(): a shaft
-  // merged with a blob near its entry) come last, after the strip search.
-  std::vector<Candidate> deferred;
-  // Re-sought candidates, refined last of all: a candidate refused for sides without edges, or
-  // for sides that diverge from the entry, has them sought again (fitSides(), SideSearch): the
-  // shaft's boundary with a grey blob (gauze) has no edge in the image, its boundary with the
-  // tissue beyond the blob has. A re-sought pair (and the region of another seed seen from this
-  // one) is less certain than a pair followed from the entry: it must be less chromatic than the
-  // tissue beside it as a strip with highlights must (matte or not: a pale tissue fold is matte),
-  // enter clearly across the border, end inside the view, and is not remembered as a parallel
-  // pair to try first next frame.
-  std::vector<Candidate> resought;
-
-  SeedSearch(FrameSearch& f, int i)
-      : F(f), S(f.S), P(f.S.params_), res(f.res), si(i), seed(f.res.seeds[static_cast<std::size_t>(i)]), crossing(i >= f.border_seeds),
-        view(crossing ? f.occluded[static_cast<std::size_t>(f.seed_view[static_cast<std::size_t>(i - f.border_seeds)])] : f.S.fov_) {}
-
-  // Whether the seed is searched: not inside a region already claimed, unless that region was
-  // refused for another seed and this seed enters the view apart from it (a shaft merged with a
-  // grey blob, a vessel or another instrument): then that region's sides are sought from this
-  // entry and its strip search runs; nothing is grown again.
-  bool due() {
-    bool const claimed = S.grower_.claimed(seed.position);
-    if (claimed && crossing) return false;
-    if (claimed && P.strip.enabled && S.grower_.labels().at<std::uint8_t>(seed.position) == 255)
-      for (std::size_t ri = 0; ri < res.regions.size() && !in_refused; ++ri) {
-        Region const& r = res.regions[ri];
-        in_refused = res.region_status[ri] != ContourRejection::kNone && r.box.contains(seed.position) &&
-                     cv::pointPolygonTest(r.boundary, seed.position, false) >= 0 &&
-                     !onOneBorderRun(r, S.fov_, r.seed, seed.position, P.contours.border_margin);
-        if (in_refused) refused_region = static_cast<int>(ri);
-      }
-    if (claimed && !in_refused) return false;
-    // Growth levels (region_growing.h): lowered toward the seed's level on a dark border and
-    // followed there by the absolute ones above them.
-    GrowthLevels const levels = growthLevels(P.regions, seed.mean_value, seed.background);
-    T = levels.thresholds;
-    strip_level = levels.strip_level;
-    mem = S.remembered(seed);
-    mem_level = mem ? rememberedLevel(T, static_cast<int>(P.regions.thresholds.size()), mem->level, mem->threshold) : 0;
-    return true;
-  }
-
-  void remember(Memory m) {
-    m.threshold = T[m.level];
-    F.memory_now.push_back(std::move(m));
-  }
-
-  // A refused seed: its region grown again at its level and claimed, until a full search is due
-  // (backing off while it keeps giving no shaft). True when that was all.
-  bool heldRefused() {
-    if (in_refused || !mem || mem->accepted || S.fullSearchDue(*mem, seed.width, F.elapsed)) return false;
-    // (a seed whose regions all leaked has none to claim)
-    std::optional<Region> r = mem->grown ? S.grower_.grow(seed.position, T[mem_level], si) : std::nullopt;
-    // (backed off beyond full_search_every: its region must be as it was, see fullSearchDue())
-    bool const changed = mem->age + F.elapsed >= P.full_search_every && r && mem->area > 0 &&
-                         std::abs(r->area - mem->area) > P.refused_area_change * std::max(r->area, mem->area);
-    if (changed) return false;
-    if (r) {
-      res.regions.push_back(*r);
-      res.region_status.push_back(mem->why);
-      S.grower_.claim(*r, 255);
-    }
-    remember({seed.position, mem_level, 0.0, false, mem->why, mem->age + F.elapsed, mem->strip_age + F.elapsed, mem->strip_fails,
-              seed.width, std::nullopt, mem->grown});
-    F.memory_now.back().fails = mem->fails;
-    F.memory_now.back().area = mem->area;  // (the last full search's: a slow change adds up)
-    return true;
-  }
-
-  // The strip search (strip_search.h): the sides searched from the seed in the gradient.
-  void tryStrip(StripCandidate const* previous) {
-    if (!F.have_gradient) {
-      cv::spatialGradient(S.filtered_, S.gx_, S.gy_, 3);  // both 3x3 Sobel derivatives in one pass (as cv::Sobel, half the time)
-      S.rays_ = packRayField(S.gx_, S.gy_, S.fov_);        // (one load per step of the ray walks)
-      F.have_gradient = true;
-    }
-    ++res.strip_searches;
-    auto sc = searchStrip(S.filtered_, S.rays_, S.fov_, seed, strip_level, F.scale, P.strip, P.contours, previous);
-    if (!sc) return;
-    ContourFit f = refineStrip(*sc, S.fov_, F.bgr, F.scale, P.strip, P.contours);
-    if (f.contour) {
-      AcrossSamples const across = acrossContour(F.bgr, *f.contour);
-      if (!stripContrastFullRes(across, P.strip)) f.rejection = ContourRejection::kLowContrast;
-      else if (mostlyGlare(across, P.contours)) f.rejection = ContourRejection::kGlare;
-      if (f.rejection != ContourRejection::kNone) f.contour.reset();
-    }
-    if (!f.contour) {
-      why = f.rejection;
-      return;
-    }
-    best = sc->region;
-    best_fit = std::move(f);
-    best_level = static_cast<int>(P.regions.thresholds.size()) - 1;  // the strip level's index
-    best_score = sc->score;
-    best_strip = std::move(sc);
-  }
-
-  // The sides of `region` sought again (its pair from the entry had no edges or diverged, or none
-  // was found in a region another seed grew): re-sought candidates. `fitted`: the region's
-  // fitSides() (its chains are reused).
-  void reseek(Region const& region, int level, SideFit const& fitted) {
-    if (P.contours.min_parallel_side_ratio <= 0.0) return;
-    for (SideFit& again : fitSidesEach(region, view, F.scale, P.contours,
-                                       {SideSearch::kParallelFirst, SideSearch::kParallelSecond, SideSearch::kStretchPair}, &fitted)) {
-      if (again.rejection != ContourRejection::kNone) continue;
-      double const score = scoreSides(again, F.bgr, P.contours);
-      if (score >= 0.0) resought.push_back({region, std::move(again), score, level, true});
-    }
-  }
-
-  // The checks of a fitted contour beyond the contour fit's: contrast, tip, glare and widening for
-  // a re-sought pair; width and continuation for a crossing shaft.
-  ContourRejection check(geometry::ApparentContour const& c, Candidate const& cd) const {
-    AcrossSamples const across = acrossContour(F.bgr, c);
-    if (cd.resought && !stripContrastFullRes(across, F.resought_contrast)) return ContourRejection::kLowContrast;
-    if (cd.resought && depthAt(view, toProcessing(c.tip_px, F.scale)) < P.resought_min_tip_depth_px) return ContourRejection::kTipOnBorder;
-    if (mostlyGlare(across, P.contours)) return ContourRejection::kGlare;
-    if (cd.resought && widening(c) > P.resought_max_widening) return ContourRejection::kWidens;
-    if (!crossing) return ContourRejection::kNone;
-    // A crossing shaft's part beyond the occluder: where they cross the two are at about the same
-    // depth, and of the same radius, so about as wide (at least kCrossingMinWidthRatio of the
-    // occluder); and it goes on on the occluder's other side.
-    int const k = F.occluders[static_cast<std::size_t>(F.seed_view[static_cast<std::size_t>(si - F.border_seeds)])];
-    geometry::ApparentContour const& o = res.contours[static_cast<std::size_t>(k)];
-    Eigen::Vector3d const e = c.entry_px.homogeneous();
-    Eigen::Vector3d const oe = geometry::footOnLine(geometry::imageAxis(o), c.entry_px).homogeneous();
-    double const we = c.lines[0].dot(e) + c.lines[1].dot(e);
-    if (we < kCrossingMinWidthRatio * (o.lines[0].dot(oe) + o.lines[1].dot(oe))) return ContourRejection::kTooThin;
-    if (!continuesBeyond(c, S.grower_.labels(), F.strip_labels[static_cast<std::size_t>(k)], S.filtered_, S.fov_, T[cd.level], F.scale))
-      return ContourRejection::kNotContinued;
-    return ContourRejection::kNone;
-  }
-
-  // Refines the candidates, best score first, until one is accepted.
-  void refineCandidates(std::vector<Candidate>& cands) {
-    std::sort(cands.begin(), cands.end(), [](Candidate const& a, Candidate const& b) { return a.score > b.score; });
-    for (auto& cd : cands) {
-      ContourFit f = refineContour(cd.sides, cd.region, view, F.bgr, F.scale, cd.resought ? F.resought_contours : P.contours);
-      if (f.contour) {
-        f.rejection = check(*f.contour, cd);
-        if (f.rejection != ContourRejection::kNone) f.contour.reset();
-      }
-      if (f.contour) {
-        best = std::move(cd.region);
-        best_fit = std::move(f);
-        best_level = cd.level;
-        best_score = cd.score;
-        best_parallel = cd.sides.parallel && !cd.resought;
-        return;
-      }
-      why = f.rejection;
-      if (f.rejection == ContourRejection::kWeakEdges && !cd.sides.parallel) reseek(cd.region, cd.level, cd.sides);
-    }
-  }
-
-  // Grows at the given levels, scores each region's side pair, refines the best in full.
-  // `tracked`: levels about last frame's (not ascending; stop at one as good as before).
-  void tryLevels(std::vector<int> const& levels, bool tracked) {
-    std::vector<Candidate> cands;
-    for (int li : levels) {
-      tried.push_back(li);
-      auto r = S.grower_.grow(seed.position, T[li], si);
-      if (!r) continue;
-      if (r->area > F.max_area) {
-        // Leaked into tissue: in a full search (levels ascending) higher thresholds only leak more.
-        if (!tracked) break;
-        continue;
-      }
-      if (!smallest || r->area < smallest->area) {
-        smallest = r;
-        smallest_level = li;
-      }
-      if (r->area < P.regions.min_area) continue;
-      SideFit sf = fitSides(*r, view, F.scale, P.contours);
-      double const score = scoreSides(sf, F.bgr, P.contours);
-      if (score < 0.0) {
-        why = sf.rejection != ContourRejection::kNone ? sf.rejection : ContourRejection::kWeakEdges;
-        // Two straight sides from the entry that diverge: one follows a blob of the shaft's level
-        // merged with it there (grey tissue, a leak); the shaft's own side is the stretch of that
-        // chain parallel to the other.
-        if (sf.rejection == ContourRejection::kNotParallel) reseek(*r, li, sf);
-        continue;
-      }
-      // (not deferred for a shaft that was found so in the last frame: its level is tried first)
-      bool const defer = sf.parallel && !(tracked && mem->parallel);
-      // (a crossing seed's pair is checked as a re-sought one: it enters the view at another
-      // shaft, not at the border)
-      (defer ? deferred : cands).push_back({std::move(*r), std::move(sf), score, li, crossing});
-      if (!defer && tracked && li == mem_level && score >= 0.85 * mem->score) break;  // as good as before
-    }
-    refineCandidates(cands);
-  }
-
-  // The refused region seen from this seed's border run: its two sides split at this entry, not
-  // at the other seed's (a shaft merged with a blob that entered the view elsewhere and was
-  // searched first: gauze reaching another border). A re-sought candidate; without a pair with
-  // edges from this entry, its sides are sought again.
-  void searchRefusedRegion() {
-    Region r = res.regions[static_cast<std::size_t>(refused_region)];
-    r.seed = seed.position;
-    r.seed_index = si;
-    if (r.area < P.regions.min_area) return;
-    SideFit sf = fitSides(r, S.fov_, F.scale, P.contours);
-    double const score = scoreSides(sf, F.bgr, P.contours);
-    int const level = std::min(static_cast<int>(std::lower_bound(T.begin(), T.end(), r.threshold) - T.begin()), static_cast<int>(T.size()) - 1);
-    if (score < 0.0 && !sf.parallel) reseek(r, level, sf);  // no pair with edges from this entry
-    if (score < 0.0) return;
-    Candidate cd{std::move(r), std::move(sf), score, level, true};
-    if (cd.sides.parallel) {
-      deferred.push_back(std::move(cd));
-    } else {
-      std::vector<Candidate> cands{std::move(cd)};
-      refineCandidates(cands);
-    }
-  }
-
-  void search() {
-    // A shaft found by the strip search in the last frame: searched about its sides first, but
-    // every full_search_every frames its regions are grown first and that strip is the fallback
-    // (a shaft found as a strip once is not held as a strip for good).
-    strip_first = !crossing && mem && mem->accepted && mem->strip && P.strip.enabled && mem->age + F.elapsed < P.full_search_every;
-    if (strip_first) tryStrip(&*mem->strip);
-    std::vector<int> all(T.size());
-    std::iota(all.begin(), all.end(), 0);
-    if (in_refused) {
-      ++res.full_searches;
-      searchRefusedRegion();  // (then the strip search, below)
-    } else if (!best && mem && mem->accepted) {
-      std::vector<int> near;
-      for (int d : {0, -1, 1})
-        if (mem_level + d >= 0 && mem_level + d < static_cast<int>(T.size())) near.push_back(mem_level + d);
-      tryLevels(near, true);
-      // Lost about last frame's level: the full search now, over the levels not grown yet.
-      if (!best) {
-        ++res.full_searches;
-        std::vector<int> rest;
-        for (int li : all)
-          if (std::find(tried.begin(), tried.end(), li) == tried.end()) rest.push_back(li);
-        tryLevels(rest, false);
-      }
-    } else if (!best) {
-      ++res.full_searches;
-      tryLevels(all, false);
-    }
-    // The region leaked or split at every level: the shaft's sides searched from the seed in the
-    // feature's gradient, once per seed. Not for a seed that is one only under the relaxed
-    // threshold facing a trocar image: the strip search, the costliest step, found no shaft from
-    // such a seed in any evaluation.
-    strip_run = !best && !crossing && P.strip.enabled && seed.mean_value <= P.seeds.threshold && S.stripSearchDue(mem, seed.width, F.elapsed);
-    if (strip_run) tryStrip(mem && mem->accepted && mem->strip && !strip_first ? &*mem->strip : nullptr);
-    if (!best && !deferred.empty()) refineCandidates(deferred);
-    while (!best && !resought.empty()) {  // (a re-sought pair is a parallel one: it re-seeks nothing)
-      std::vector<Candidate> last = std::move(resought);
-      resought.clear();
-      refineCandidates(last);
-    }
-  }
-
-  // The seed's memory, and the shaft found (claimed, reported) or the region refused (claimed).
-  void conclude() {
-    if (best) {
-      // (a strip followed from the last frame's had no full search: its age goes on)
-      int const age = strip_first && best_strip ? mem->age + F.elapsed : 0;
-      remember({seed.position, best_level, best_score, true, ContourRejection::kNone, age, 0, 0, seed.width, best_strip});
-      F.memory_now.back().parallel = best_parallel;
-    }
-    // A second detection of a shaft already found (a seed on its shadow, or a second seed on its
-    // border run): the region is claimed, not reported. Its memory stays that of a shaft, so that
-    // next frame this seed is searched again at once (the other seed may be gone by then).
-    if (best && duplicatesAShaft(*best_fit.contour, res.contours)) {
-      why = ContourRejection::kDuplicate;
-      smallest = std::move(best);
-      best.reset();
-    }
-    if (!best && why != ContourRejection::kDuplicate) {
-      int const age = mem && !mem->accepted ? mem->strip_age : 0, fails = mem && !mem->accepted ? mem->strip_fails : 0;
-      // (a seed that only had its strip searched has had no full search: due at once next time)
-      remember({seed.position, smallest ? smallest_level : 0, 0.0, false, why, in_refused ? P.full_search_every : 0,
-                strip_run ? 0 : age + F.elapsed, strip_run ? fails + 1 : fails, seed.width, std::nullopt, smallest.has_value()});
-      F.memory_now.back().fails = mem && !mem->accepted && !in_refused ? mem->fails + 1 : 1;
-      F.memory_now.back().area = smallest ? smallest->area : 0;
-    }
-    Region const* keep = best ? &*best : (smallest ? &*smallest : nullptr);
-    if (!keep) return;
-    res.regions.push_back(*keep);
-    res.region_status.push_back(best ? ContourRejection::kNone : why);
-    // Claimed either way, so the other seeds of this blob are skipped; an accepted shaft claims
-    // only its strip (widened by 2 px), so a touching instrument's seed still grows.
-    std::vector<cv::Point> const strip = best ? claimedStrip(*best_fit.contour, F.scale) : std::vector<cv::Point>{};
-    S.grower_.claim(*keep, best ? static_cast<int>(res.regions.size()) : 255, strip);
-    if (best) report(strip);
-  }
-
-  void report(std::vector<cv::Point> const& strip) {
-    F.strips.push_back(strip);
-    F.strip_labels.push_back(static_cast<int>(res.regions.size()));
-    geometry::ApparentContour c = *best_fit.contour;
-    // Reported on the image axis (the lines' bisector): the seed, the middle of the shaft's border
-    // run, is off the axis where the shaft crosses the border obliquely, and the farthest region
-    // point can be a jaw's corner. (Only the report: the claim and the checks keep the region's.)
-    geometry::ImageLine const ax = geometry::imageAxis(c);
-    c.entry_px = geometry::footOnLine(ax, c.entry_px);
-    c.tip_px = geometry::footOnLine(ax, c.tip_px);
-    c.insertion_point_id = seed.insertion_point;
-    res.contours.push_back(c);
-    F.contour_memory.push_back(F.memory_now.size() - 1);  // this seed's memory (pushed by conclude())
-    F.contour_region.push_back(res.regions.size() - 1);   // its region (pushed by conclude())
-    F.all_confirmed = F.all_confirmed && mem && mem->accepted;
-    res.edges.push_back(best_fit.edges);
-  }
-};
-
-SegmentationResult InstrumentSegmenter::detectColour(cv::Mat const& bgr, std::vector<Eigen::Vector3d> const& trocars, int scale) {
-  FrameSearch F(*this, bgr, trocars, scale);
-  for (int si = 0;; ++si) {
-    if (si == F.border_seeds && params_.crossing_seeds && !F.res.contours.empty())
-      addCrossingSeeds(F.res, F.strips, F.strip_labels, F.occluded, F.occluders, F.seed_view);
-    if (si >= static_cast<int>(F.res.seeds.size())) break;
-    if (static_cast<int>(F.res.contours.size()) >= params_.regions.max_regions) break;
-    SeedSearch s(F, si);
-    if (!s.due() || s.heldRefused()) continue;
-    s.search();
-    s.conclude();
-  }
-  // A shaft found whole after a strip inside it was (the strip's seed came first): the strip is a
-  // duplicate as in the other order. Then contours that overlap one that fits better: a wedge
-  // between a shaft's edge and a tissue edge, found as a strip from a seed beside that shaft.
-  F.drop(narrowerDuplicates(F.res.contours));
-  F.drop(overlappingDuplicates(F.res.contours));
-  labels_ = grower_.labels();
-  F.carryMemory();
-  memory_ = std::move(F.memory_now);
-  // Only shafts confirmed by two detections in a row are tracked: a new one (or a tissue band
-  // found in some frames only) makes the next frame a detection frame too, so that a false shaft
-  // is not held for detect_every frames.
-  startTracks(F.res, F.all_confirmed, bgr, F.contour_memory);
-  return std::move(F.res);
-}
-
-void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr,
-                                      std::vector<std::size_t> const& memory) {
+void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr) {
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
-  tracked_memory_.clear();
   if (follow && params_.tracking.detect_every > 1)
-    for (std::size_t i = 0; i < res.contours.size(); ++i) {
-      tracked_.push_back(startTrack(res.contours[i], res.edges[i], bgr, params_.tracking));
-      tracked_memory_.push_back(i < memory.size() ? memory[i] : std::numeric_limits<std::size_t>::max());
-    }
+    for (std::size_t i = 0; i < res.contours.size(); ++i) tracked_.push_back(startTrack(res.contours[i], res.edges[i], bgr, params_.tracking));
   tracked_size_ = bgr.size();
   scale_ = res.scale;
   since_detection_ = 0;
@@ -669,284 +144,6 @@ void InstrumentSegmenter::updateFieldOfView() {
   frames_since_fov_ = 0;
 }
 
-// The learned detector: the network's shaft-mask components (proposeShaftRegions()), each one's
-// side pair (maskSides()) through the same contour fit as the grown regions (refineContour()),
-// the same glare check and duplicate removal.
-SegmentationResult InstrumentSegmenter::detectLearned(cv::Mat const& bgr, int scale) {
-  SegmentationResult res;
-  res.scale = scale;
-  cv::Mat const prob = net_->shaftProbability(bgr);
-  cv::Mat p;  // at the processing scale
-  cv::resize(prob, p, fov_.mask.size(), 0, 0, cv::INTER_LINEAR);
-  res.regions = proposeShaftRegions(p, fov_, params_.regions.min_area, params_.contours.border_margin);
-  std::vector<std::size_t> contour_region;
-  labels_ = cv::Mat::zeros(fov_.mask.size(), CV_8U);
-  // A mask side is as good as the network's resolution: an image edge farther than 1.5 of its
-  // pixels from it is another edge; a line on the mask's side has its pixel's quantisation
-  // error (pixel / sqrt(12)) as the systematic floor of its covariance.
-  double const net_px = static_cast<double>(bgr.cols) / prob.cols;
-  double const gate_px = 1.5 * net_px;
-  double const mask_floor_px = std::max(params_.contours.line_sigma_floor_px, net_px / std::sqrt(12.0));
-  for (std::size_t ri = 0; ri < res.regions.size() && static_cast<int>(res.contours.size()) < params_.regions.max_regions; ++ri) {
-    Region const& region = res.regions[ri];
-    ContourRejection why = ContourRejection::kTooFewPoints;
-    std::optional<ContourFit> fit;
-    SideFit const sides = maskSides(region, fov_, scale, params_.contours);
-    if (sides.rejection != ContourRejection::kNone) {
-      why = sides.rejection;
-    } else {
-      // The lines on the frame's edges where they are the mask's sides, else on the mask's sides.
-      ContourFit f = refineContour(sides, region, fov_, bgr, scale, params_.contours);
-      if (!f.contour || !agreesWithMask(*f.contour, sides, gate_px)) f = maskContour(sides, region, scale, params_.contours, mask_floor_px);
-      if (f.contour && mostlyGlare(bgr, *f.contour, params_.contours)) f.rejection = ContourRejection::kGlare;
-      else if (f.contour && duplicatesAShaft(*f.contour, res.contours)) f.rejection = ContourRejection::kDuplicate;
-      if (f.contour && f.rejection == ContourRejection::kNone) fit = std::move(f);
-      else why = f.rejection;
-    }
-    res.region_status.push_back(fit ? ContourRejection::kNone : why);
-    if (!fit) continue;
-    geometry::ApparentContour c = *fit->contour;
-    geometry::ImageLine const ax = geometry::imageAxis(c);  // reported on the image axis, as the colour method's
-    c.entry_px = geometry::footOnLine(ax, c.entry_px);
-    c.tip_px = geometry::footOnLine(ax, c.tip_px);
-    res.contours.push_back(c);
-    res.edges.push_back(fit->edges);
-    contour_region.push_back(ri);
-    cv::drawContours(labels_, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(static_cast<int>(res.contours.size())),
-                     cv::FILLED);
-  }
-  res.regions.resize(res.region_status.size());  // (those beyond max_regions were not fitted)
-  auto drop = [&](std::vector<std::size_t> const& dup) {
-    for (auto it = dup.rbegin(); it != dup.rend(); ++it) {
-      res.region_status[contour_region[*it]] = ContourRejection::kDuplicate;
-      res.contours.erase(res.contours.begin() + static_cast<std::ptrdiff_t>(*it));
-      res.edges.erase(res.edges.begin() + static_cast<std::ptrdiff_t>(*it));
-      contour_region.erase(contour_region.begin() + static_cast<std::ptrdiff_t>(*it));
-    }
-  };
-  drop(narrowerDuplicates(res.contours));
-  drop(overlappingDuplicates(res.contours));
-  p.convertTo(filtered_, CV_8U, -255.0, 255.0);  // the feature image for overlays: low on shafts, as the colour feature
-  startTracks(res, true, bgr, {});
-  return res;
-}
-
-// Crossing seeds ([Doignon07] Sec. 3's 1-D search, along an accepted shaft's edge instead of the
-// border). Only about an accepted shaft that a refused region touches: the part of a crossing
-// shaft on the border's side of it, refused (merged with a blob, or too short alone), is the
-// sign. Along each side of its strip, 1.5 px outside: runs of the feature at or below the seed
-// threshold, at least seeds.min_width long and at most half the side, neither claimed nor at
-// the border (the border's own seeds). Their field of view: fov_ less the shaft's claimed
-// pixels (its edge is their border: fitSides() takes the region's boundary along it for the
-// entry, and the entry checks measure against it).
-void InstrumentSegmenter::addCrossingSeeds(SegmentationResult& res, std::vector<std::vector<cv::Point>> const& strips,
-                                           std::vector<int> const& strip_labels, std::deque<FieldOfView>& views,
-                                           std::vector<int>& view_shafts, std::vector<int>& seed_view) const {
-  cv::Mat const& L = grower_.labels();
-  std::vector<bool> touched(strips.size(), false);
-  for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
-    if (res.region_status[ri] == ContourRejection::kNone) continue;
-    for (cv::Point const& q : res.regions[ri].boundary)
-      for (cv::Point const d : {cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
-        cv::Point const r = q + d;
-        if (r.x < 0 || r.y < 0 || r.x >= L.cols || r.y >= L.rows) continue;
-        int const l = L.at<std::uint8_t>(r);
-        for (std::size_t k = 0; k < strips.size(); ++k) touched[k] = touched[k] || (l != 0 && l == strip_labels[k]);
-      }
-  }
-  int const margin = params_.contours.border_margin + 2;
-  for (std::size_t k = 0; k < strips.size(); ++k) {
-    if (!touched[k] || strips[k].size() != 4) continue;
-    std::vector<Seed> found;
-    // The strip's corners: entry and tip feet of line 0 (0, 3) and of line 1 (1, 2).
-    for (auto const& [a, b, o] : {std::array<int, 3>{0, 3, 1}, std::array<int, 3>{1, 2, 0}}) {
-      Eigen::Vector2d const pa(strips[k][a].x, strips[k][a].y), pb(strips[k][b].x, strips[k][b].y), po(strips[k][o].x, strips[k][o].y);
-      double const len = (pb - pa).norm();
-      if (len < 2.0 * params_.seeds.min_width) continue;
-      Eigen::Vector2d const u = (pb - pa) / len;
-      Eigen::Vector2d nrm(-u.y(), u.x());
-      if (nrm.dot(po - pa) > 0.0) nrm = -nrm;  // away from the other side
-      int const n = static_cast<int>(len);
-      std::vector<int> value(static_cast<std::size_t>(n + 1), -1);  // -1: not searched there
-      std::vector<cv::Point> at(static_cast<std::size_t>(n + 1));
-      std::vector<float> valid;
-      for (int i = 0; i <= n; ++i) {
-        Eigen::Vector2d const x = pa + i * u + 1.5 * nrm;
-        cv::Point const q(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
-        if (q.x < 0 || q.y < 0 || q.x >= filtered_.cols || q.y >= filtered_.rows || !fov_.mask.at<std::uint8_t>(q) ||
-            fov_.depth.at<float>(q) < margin)
-          continue;
-        at[i] = q;
-        value[i] = filtered_.at<std::uint8_t>(q);
-        valid.push_back(static_cast<float>(value[i]));
-        if (grower_.claimed(q)) value[i] = 256;  // searched, not a seed
-      }
-      if (valid.empty()) continue;
-      std::nth_element(valid.begin(), valid.begin() + valid.size() * 3 / 4, valid.end());
-      float const background = valid[valid.size() * 3 / 4];  // the tissue's level beside the shaft
-      for (int i = 0; i <= n;) {
-        if (value[i] < 0 || value[i] > params_.seeds.threshold) {
-          ++i;
-          continue;
-        }
-        int j = i;
-        double sum = 0.0;
-        while (j <= n && value[j] >= 0 && value[j] <= params_.seeds.threshold) sum += value[j++];
-        int const w = j - i;
-        if (w >= params_.seeds.min_width && w <= n / 2) {
-          Seed sd;
-          sd.position = at[(i + j - 1) / 2];
-          sd.width = w;
-          sd.mean_value = static_cast<float>(sum / w);
-          sd.background = background;
-          found.push_back(sd);
-        }
-        i = j;
-      }
-    }
-    if (found.empty()) continue;
-    FieldOfView v;
-    v.mask = fov_.mask.clone();
-    // (dilated by 1 px: the claimed strip's rasterised edge is jagged, and fitSides() looks for
-    // the border at border_margin px straight across; a boundary point on a step of it was
-    // missed, which split the entry)
-    cv::Mat shaft;
-    cv::dilate(L == strip_labels[k], shaft, cv::Mat());
-    v.mask.setTo(0, shaft);
-    cv::Mat dist;
-    cv::distanceTransform(~shaft, dist, cv::DIST_L2, 3);
-    v.depth = cv::min(fov_.depth, dist);
-    v.border = fov_.border;  // (the border's seeds' path: crossing seeds are not searched along it)
-    v.bounds = fov_.bounds;
-    v.circular = fov_.circular;
-    v.centre = fov_.centre;
-    views.push_back(std::move(v));
-    view_shafts.push_back(static_cast<int>(k));
-    for (Seed const& sd : found) {
-      res.seeds.push_back(sd);
-      seed_view.push_back(static_cast<int>(views.size()) - 1);
-    }
-  }
-}
-
-// The memory of the nearest of last frame's seeds within level_memory_px.
-InstrumentSegmenter::Memory const* InstrumentSegmenter::remembered(Seed const& seed) const {
-  Memory const* best = nullptr;
-  int best_d = 0;
-  for (auto const& m : memory_) {
-    int const d = entryDistance(m.entry, seed.position);
-    if (d <= params_.level_memory_px && (!best || d < best_d)) {
-      best = &m;
-      best_d = d;
-    }
-  }
-  return best;
-}
-
-// How far apart two seeds' entries are for the seed memory (processing px, city block).
-int InstrumentSegmenter::entryDistance(cv::Point a, cv::Point b) { return std::abs(a.x - b.x) + std::abs(a.y - b.y); }
-
-// Whether a search that gave nothing `fails` times in a row is due, `age` frames after the last:
-// every `every` frames, the interval doubling per failure after the first, up to `max_every`.
-namespace {
-bool backedOffDue(int age, int fails, int every, int max_every) {
-  every = std::max(1, every);
-  max_every = std::max(every, max_every);
-  for (int k = 1; k < fails && every < max_every; ++k) every *= 2;
-  return age >= std::min(every, max_every);
-}
-}  // namespace
-
-// Whether a seed's border run is now of another width than its memory's (by more than a quarter):
-// something entered or left there.
-bool InstrumentSegmenter::runChanged(Memory const& m, int width) { return std::abs(width - m.width) * 4 > std::max(width, m.width); }
-
-// A refused seed's full search (growth at every level): every full_search_every frames, and
-// less and less often while it keeps giving no shaft (the interval doubles per failure up to
-// full_search_max_every frames), unless its run changed width (or its region its area:
-// process()). A memory kept over a frame without its run (carried) holds only for a run of its
-// width.
-bool InstrumentSegmenter::fullSearchDue(Memory const& m, int width, int elapsed) const {
-  int const age = m.age + elapsed;
-  if (runChanged(m, width) && (m.carried || age >= params_.full_search_every)) return true;
-  return backedOffDue(age, m.fails, params_.full_search_every, params_.full_search_max_every);
-}
-
-// The strip search of a seed that keeps giving no shaft (it costs as much as the rest of a
-// frame) runs at its full searches, but the interval doubles per failure up to
-// strip_search_max_every frames. Always for a new seed, a lost shaft, or a run that changed width.
-bool InstrumentSegmenter::stripSearchDue(Memory const* m, int width, int elapsed) const {
-  if (!m || m->accepted || m->strip_fails == 0) return true;
-  if (runChanged(*m, width)) return true;
-  return backedOffDue(m->strip_age + elapsed, m->strip_fails, params_.full_search_every, params_.strip_search_max_every);
-}
-
-bool duplicatesAShaft(geometry::ApparentContour const& c, std::vector<geometry::ApparentContour> const& found) {
-  geometry::ImageLine const a = geometry::imageAxis(c);
-  Eigen::Vector3d const ce = geometry::footOnLine(a, c.entry_px).homogeneous(), ct = geometry::footOnLine(a, c.tip_px).homogeneous();
-  for (geometry::ApparentContour const& o : found) {
-    geometry::ImageLine const b = geometry::imageAxis(o);
-    if (std::abs(a.head<2>().dot(b.head<2>())) < std::cos(kDuplicateMaxAngleDeg * M_PI / 180.0)) continue;
-    Eigen::Vector3d const e = o.entry_px.homogeneous();
-    double const half_width = 0.5 * (o.lines[0].dot(e) + o.lines[1].dot(e));
-    if (std::abs(b.dot(ce)) < half_width && std::abs(b.dot(ct)) < half_width) return true;
-  }
-  return false;
-}
-
-std::vector<std::size_t> overlappingDuplicates(std::vector<geometry::ApparentContour> const& found) {
-  std::vector<std::vector<cv::Point2f>> quad;
-  std::vector<double> area;
-  for (geometry::ApparentContour const& c : found) {
-    std::vector<cv::Point2f> q;
-    for (Eigen::Vector2d const& f : geometry::shaftQuad(c, c.entry_px, c.tip_px))
-      q.emplace_back(static_cast<float>(f.x()), static_cast<float>(f.y()));
-    quad.emplace_back();
-    cv::convexHull(q, quad.back());  // (convex, as cv::intersectConvexConvex() needs, whatever the lines' convergence)
-    area.push_back(std::abs(cv::contourArea(quad.back())));
-  }
-  // (a residual that is not finite sorts last: the comparison stays a strict weak order)
-  auto fit = [&](std::size_t i) {
-    double const r = found[i].residual_px;
-    return std::isfinite(r) ? r : std::numeric_limits<double>::infinity();
-  };
-  std::vector<std::size_t> order(found.size());
-  std::iota(order.begin(), order.end(), std::size_t{0});
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return fit(a) < fit(b); });
-  std::vector<std::size_t> kept, out;
-  for (std::size_t i : order) {
-    bool overlaps = false;
-    for (std::size_t j : kept) {
-      std::vector<cv::Point2f> common;
-      float const a = cv::intersectConvexConvex(quad[i], quad[j], common, true);
-      if (a > kMaxShaftOverlap * (area[i] + area[j] - a)) {  // intersection over union
-        overlaps = true;
-        break;
-      }
-    }
-    (overlaps ? out : kept).push_back(i);
-  }
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
-std::vector<std::size_t> narrowerDuplicates(std::vector<geometry::ApparentContour> const& found) {
-  std::vector<std::size_t> out;
-  for (std::size_t i = 0; i < found.size(); ++i) {
-    Eigen::Vector2d const mid = 0.5 * (found[i].entry_px + found[i].tip_px);
-    double const wi = geometry::shaftWidthAt(found[i], mid);
-    for (std::size_t j = 0; j < found.size(); ++j) {
-      if (j == i) continue;
-      double const wj = geometry::shaftWidthAt(found[j], mid);
-      // (equal widths: the later one goes, as when it was found)
-      if ((wj > wi || (wj == wi && j < i)) && duplicatesAShaft(found[i], {found[j]})) {
-        out.push_back(i);
-        break;
-      }
-    }
-  }
-  return out;
-}
 
 void drawSegmentationOverlay(cv::Mat& img, SegmentationResult const& r, std::vector<Eigen::Vector3d> const& trocars) {
   auto full = [&](cv::Point const& q) {  // (the block's centre, truncated to a pixel)

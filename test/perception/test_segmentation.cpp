@@ -12,9 +12,13 @@
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/sim/scene_renderer.h"
 
+#include "contour_test_util.h"
+
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
+using endo_guidance::test::bandContour;
+using endo_guidance::test::lineErrorOverItsExtent;
 using namespace endo_guidance::pipeline;
 
 namespace {
@@ -38,16 +42,6 @@ struct HardScene {
     }
   }
 };
-
-// The larger distance of contour c's two lines to the true ones, at the feet of c's own entry and
-// tip (over the extent c reports).
-double lineErrorOverItsExtent(ApparentContour const& c, ApparentContour const& truth) {
-  double e = 0.0;
-  for (int l = 0; l < 2; ++l)
-    for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
-      e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
-  return e;
-}
 
 struct Stats {
   int visible = 0, found = 0, false_shafts = 0;
@@ -664,22 +658,6 @@ TEST(Segmentation, AReSoughtSideOnATouchingInstrumentIsRefusedAsWidening) {
   EXPECT_GT(error(10.0), 1.0);
 }
 
-namespace {
-// A contour along p0 -> p1 (entry -> tip) with parallel lines h px either side of its axis.
-ApparentContour bandContour(Eigen::Vector2d const& p0, Eigen::Vector2d const& p1, double h) {
-  Eigen::Vector2d const u = (p1 - p0).normalized(), n(-u.y(), u.x());
-  ApparentContour c;
-  for (int s = 0; s < 2; ++s) {
-    Eigen::Vector2d const q = p0 + (s == 0 ? h : -h) * n;
-    Eigen::Vector3d l(n.x(), n.y(), -n.dot(q));
-    if (l.dot(p0.homogeneous()) < 0.0) l = -l;  // the shaft on the positive side
-    c.lines[s] = l;
-  }
-  c.entry_px = p0;
-  c.tip_px = p1;
-  return c;
-}
-}  // namespace
 
 // duplicatesAShaft(), exact geometry: a shaft 40 px wide along y = 240 from x = 0 to 400. A
 // contour inside its strip (entry and tip within 20 px of its axis) is a second detection of it

@@ -9,16 +9,10 @@
 #include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/field_of_view.h"
 #include "endo_guidance/perception/region_growing.h"
+#include "endo_guidance/perception/segmentation_params.h"
+#include "endo_guidance/perception/shaft_detector.h"
 
 namespace endo_guidance::perception {
-
-/// The package's shaft network (models/shaft_net.yaml; scripts/train_shaft_net.sh reproduces it).
-std::string defaultShaftModel();
-
-struct LearnedDetectorParams {
-  std::string model;               ///< the model's YAML (input size, normalisation, ONNX file); empty: defaultShaftModel()
-  int threads = 1;                 ///< OpenCV threads (cv::setNumThreads(): process-wide)
-};
 
 /// The per-pixel shaft network, run by OpenCV's DNN module on the CPU (no training framework at
 /// run time). The YAML beside the ONNX file gives the input size, the normalisation
@@ -78,5 +72,28 @@ ContourFit maskContour(SideFit const& sides, Region const& region, int scale, Co
 /// Whether each of the contour's lines lies within gate_px (median) of a different side of the
 /// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
 bool agreesWithMask(geometry::ApparentContour const& c, SideFit const& sides, double gate_px);
+
+/// The learned shaft detector: the network's shaft-mask components (proposeShaftRegions()), each
+/// one's side pair (maskSides()) through the contour fit (refineContour()) where the frame's
+/// edges are the mask's sides (agreesWithMask()), else on the mask's sides (maskContour()); then
+/// the glare check and the duplicates' removal, as the colour method's.
+class LearnedShaftDetector final : public ShaftDetector {
+ public:
+  /// Loads the model: std::runtime_error if it cannot be.
+  explicit LearnedShaftDetector(SegmentationParams const& params);
+  /// (The copy shares the loaded network.)
+  std::unique_ptr<ShaftDetector> clone() const override { return std::make_unique<LearnedShaftDetector>(*this); }
+  SegmentationResult detect(DetectionFrame const& frame) override;
+  bool followable() const override { return true; }
+  void setParams(SegmentationParams const& p) override;  // (reloads the model if its path or threads changed)
+  void reset() override {}
+  cv::Mat const& feature() const override { return feature_; }
+  cv::Mat const& labels() const override { return labels_; }
+
+ private:
+  SegmentationParams params_;
+  std::shared_ptr<ShaftNet> net_;
+  cv::Mat feature_, labels_;
+};
 
 }  // namespace endo_guidance::perception
