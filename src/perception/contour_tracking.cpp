@@ -123,21 +123,16 @@ TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std
   return s;
 }
 
-TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, ContourLinesParams const& p,
-                            ContourTrackingParams const& tp, FieldOfView const* fov, int scale) {
-  TrackingResult out;
-  auto reject = [&](ContourRejection r) {
-    out.rejection = r;
-    return out;
-  };
+namespace {
+// The two passes of refineContour() per line: wide about last frame's line (the shaft moved by up
+// to coarse_halfwidth_px), then narrow about the line found; then the parallelism check.
+ContourRejection refineTrackedLines(TrackedShaft const& prev, cv::Mat const& bgr, ContourLinesParams const& p,
+                                    ContourTrackingParams const& tp, RefinedLine (&ref)[2]) {
   geometry::ApparentContour const& pc = prev.contour;
   Eigen::Vector2d const dir0 = axisDirection(pc);
-  // The two passes of refineContour(): wide about last frame's line (the shaft moved by up to
-  // coarse_halfwidth_px), then narrow about the line found.
   ContourLinesParams wide = widePass(p);
   wide.refine_step_px = tp.coarse_step_px;  // the narrow pass uses every profile
   wide.min_edge_points = std::max(3, static_cast<int>(p.min_edge_points * p.refine_step_px / tp.coarse_step_px));
-  RefinedLine ref[2];
   for (int s = 0; s < 2; ++s) {
     geometry::ImageLine const& l = pc.lines[s];
     Eigen::Vector2d const d(-l.y(), l.x());
@@ -145,44 +140,38 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
     double t1 = d.dot(geometry::footOnLine(l, pc.entry_px + prev.edge_end * dir0));
     if (t0 > t1) std::swap(t0, t1);
     auto const r0 = refineLineSubpixel(bgr, l, t0, t1, wide);
-    if (!r0) return reject(ContourRejection::kWeakEdges);
+    if (!r0) return ContourRejection::kWeakEdges;
     auto const r = refineLineSubpixel(bgr, r0->line, t0, t1, p);
-    if (!r) return reject(ContourRejection::kWeakEdges);
-    if (r->residual_px > p.max_residual_px) return reject(ContourRejection::kResidual);
+    if (!r) return ContourRejection::kWeakEdges;
+    if (r->residual_px > p.max_residual_px) return ContourRejection::kResidual;
     ref[s] = *r;
   }
   double const cosang = std::abs(ref[0].line.head<2>().dot(ref[1].line.head<2>()));
-  if (cosang < std::cos(p.max_angle_deg * M_PI / 180.0)) return reject(ContourRejection::kNotParallel);
-  TrackedShaft now;
-  geometry::ApparentContour& c = now.contour;
-  c = pc;  // ids carried over
-  c.lines = {ref[0].line, ref[1].line};
-  c.line_covariances = {ref[0].covariance, ref[1].covariance};
-  c.line_residual_px = {ref[0].residual_px, ref[1].residual_px};
-  c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
-  now.edges = {ref[0].inliers, ref[1].inliers};
-  // The new axis, oriented as before. The entry: where it leaves the field of view (a shaft
-  // pivoting about its trocar slides along the border), else last frame's moved onto it.
-  geometry::ImageLine const ax = geometry::imageAxis(c);
-  Eigen::Vector2d dir(-ax.y(), ax.x());
-  if (dir.dot(dir0) < 0.0) dir = -dir;
-  Eigen::Vector2d const e0 = geometry::footOnLine(ax, pc.entry_px);
-  Eigen::Vector2d entry = e0;
-  if (fov && !fov->mask.empty()) {  // where the new axis leaves the view, at most 16 processing px away
-    double const sc = std::max(1, scale), off = 0.5 * (sc - 1);
-    bool at_edge = false;
-    auto const e = walkToEdge(*fov, (e0 - Eigen::Vector2d(off, off)) / sc, dir, 16, &at_edge);
-    if (e && at_edge) entry = geometry::footOnLine(ax, *e * sc + Eigen::Vector2d(off, off));
-  }
-  // The tip moves as the end of the shaft-like interior along the axis moves (the end of the
-  // edges jumped by up to 200 px on the robotic sequences, where highlights break the edges and
-  // the wrist continues them), from where the detection put it (tip_offset); without contrast it
-  // keeps its position. A chroma end beyond the search window (an offset larger than the reach)
-  // holds it too: the first end met is then the window's start, frame after frame.
-  // Last frame's distances along the axis, from the new entry: the entry moves along the axis
-  // (from the detection's point to where the axis leaves the view, or with the shaft), the tip
-  // does not move with it.
-  double const shift = dir.dot(e0 - entry);
+  if (cosang < std::cos(p.max_angle_deg * M_PI / 180.0)) return ContourRejection::kNotParallel;
+  return ContourRejection::kNone;
+}
+
+// The entry on the new axis `ax` (direction `dir`): where it leaves the field of view, at most
+// 16 processing px away (a shaft pivoting about its trocar slides along the border), else last
+// frame's entry moved onto it.
+Eigen::Vector2d trackedEntry(geometry::ImageLine const& ax, Eigen::Vector2d const& dir, Eigen::Vector2d const& prev_entry,
+                             FieldOfView const* fov, int scale) {
+  Eigen::Vector2d const e0 = geometry::footOnLine(ax, prev_entry);
+  if (!fov || fov->mask.empty()) return e0;
+  double const sc = std::max(1, scale), off = 0.5 * (sc - 1);
+  bool at_edge = false;
+  auto const e = walkToEdge(*fov, (e0 - Eigen::Vector2d(off, off)) / sc, dir, 16, &at_edge);
+  return e && at_edge ? geometry::footOnLine(ax, *e * sc + Eigen::Vector2d(off, off)) : e0;
+}
+
+// The tip and the fitted extent of `now` (its lines, edges and entry set), from last frame's
+// distances moved by `shift` along the axis (the entry moved, the tip does not move with it).
+// The tip moves as the end of the shaft-like interior along the axis moves (the end of the edges
+// jumps where highlights break them and a wrist continues them), from where the detection put it
+// (tip_offset); without contrast, or beyond the search window, it keeps its position.
+void followTip(TrackedShaft const& prev, TrackedShaft& now, cv::Mat const& bgr, ContourTrackingParams const& tp,
+               Eigen::Vector2d const& entry, Eigen::Vector2d const& dir, double shift, int scale) {
+  geometry::ApparentContour const& c = now.contour;
   double const edge_start = prev.edge_start + shift, edge_end = prev.edge_end + shift;
   double const detected_edge_end = prev.detected_edge_end + shift;
   double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + (prev.tip_distance + shift) * dir));
@@ -192,34 +181,61 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   now.tip_offset = prev.tip_offset;
   now.tip_distance = now.chroma_tip + now.tip_offset;
   // As in the detection (refineContour), beyond the end of the straight sides only the jaws may
-  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal. (The tip may stay
-  // where it was: the detection bounds it by the region's sides, which can end farther than the
-  // sub-pixel edges.)
-  {
-    double t_start = 0.0, t_sides = 0.0;
-    edgeExtent(now.edges, entry, dir, &t_start, &t_sides);
-    double const end_width = std::max(widthAt(c, entry + t_sides * dir), 2.0 * std::max(1, scale));
-    now.tip_distance = std::min(now.tip_distance, std::max(t_sides + 2.5 * end_width, prev.tip_distance + shift));
-  }
-  // The fitted extent is the detection's, cut at the tip (a withdrawal). Grown with the tip, it
-  // took in the wrist beyond a robotic shaft (in line with it), whose edges then let the tip run
-  // on by a width per frame; shrunk by the tip's
-  // steps, it ratcheted down on a still image. An inserted shaft's tip still follows, up to 2.5
-  // widths beyond the edges, until the next detection.
+  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal.
+  double t_start = 0.0, t_sides = 0.0;
+  edgeExtent(now.edges, entry, dir, &t_start, &t_sides);
+  double const end_width = std::max(widthAt(c, entry + t_sides * dir), 2.0 * std::max(1, scale));
+  now.tip_distance = std::min(now.tip_distance, std::max(t_sides + 2.5 * end_width, prev.tip_distance + shift));
+  // The fitted extent is the detection's, cut at the tip (a withdrawal): grown with the tip it
+  // takes in a wrist in line with the shaft, shrunk by the tip's steps it ratchets down on a
+  // still image.
   now.edge_start = edge_start;
   now.detected_edge_end = detected_edge_end;
   now.edge_end = std::max(edge_start + 0.5 * (detected_edge_end - edge_start), std::min(now.tip_distance, detected_edge_end));
-  c.entry_px = entry;
-  c.tip_px = entry + now.tip_distance * dir;
+}
+
+// The detection's shape checks on the followed contour c, and its width against last frame's.
+ContourRejection trackedShapeCheck(geometry::ApparentContour const& c, geometry::ApparentContour const& pc,
+                                   ContourLinesParams const& p, ContourTrackingParams const& tp) {
   double const len = (c.tip_px - c.entry_px).norm();
-  if (len < p.min_length_px) return reject(ContourRejection::kTooShort);
+  if (len < p.min_length_px) return ContourRejection::kTooShort;
   double const we = widthAt(c, c.entry_px), wt = widthAt(c, c.tip_px);
   // Positive widths at both ends: the lines do not cross between them.
-  if (we < p.min_width_px || wt < p.min_width_px) return reject(ContourRejection::kTooThin);
+  if (we < p.min_width_px || wt < p.min_width_px) return ContourRejection::kTooThin;
   double const we0 = widthAt(pc, pc.entry_px);
-  if (std::abs(we - we0) > tp.max_width_change * we0 + 2.0) return reject(ContourRejection::kWidthJump);
-  if (len < p.min_elongation * 0.5 * (we + wt)) return reject(ContourRejection::kNotElongated);
-  out.shaft = std::move(now);
+  if (std::abs(we - we0) > tp.max_width_change * we0 + 2.0) return ContourRejection::kWidthJump;
+  if (len < p.min_elongation * 0.5 * (we + wt)) return ContourRejection::kNotElongated;
+  return ContourRejection::kNone;
+}
+}  // namespace
+
+TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, ContourLinesParams const& p,
+                            ContourTrackingParams const& tp, FieldOfView const* fov, int scale) {
+  TrackingResult out;
+  RefinedLine ref[2];
+  out.rejection = refineTrackedLines(prev, bgr, p, tp, ref);
+  if (out.rejection != ContourRejection::kNone) return out;
+  geometry::ApparentContour const& pc = prev.contour;
+  TrackedShaft now;
+  geometry::ApparentContour& c = now.contour;
+  c = pc;  // ids carried over
+  c.lines = {ref[0].line, ref[1].line};
+  c.line_covariances = {ref[0].covariance, ref[1].covariance};
+  c.line_residual_px = {ref[0].residual_px, ref[1].residual_px};
+  c.residual_px = std::sqrt(0.5 * (ref[0].residual_px * ref[0].residual_px + ref[1].residual_px * ref[1].residual_px));
+  now.edges = {ref[0].inliers, ref[1].inliers};
+  // The new axis, oriented as before, and its entry; last frame's distances along the axis are
+  // then measured from the new entry.
+  geometry::ImageLine const ax = geometry::imageAxis(c);
+  Eigen::Vector2d dir(-ax.y(), ax.x());
+  if (dir.dot(axisDirection(pc)) < 0.0) dir = -dir;
+  Eigen::Vector2d const entry = trackedEntry(ax, dir, pc.entry_px, fov, scale);
+  double const shift = dir.dot(geometry::footOnLine(ax, pc.entry_px) - entry);
+  followTip(prev, now, bgr, tp, entry, dir, shift, scale);
+  c.entry_px = entry;
+  c.tip_px = entry + now.tip_distance * dir;
+  out.rejection = trackedShapeCheck(c, pc, p, tp);
+  if (out.rejection == ContourRejection::kNone) out.shaft = std::move(now);
   return out;
 }
 

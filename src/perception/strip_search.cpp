@@ -417,6 +417,76 @@ Pair pairSides(std::vector<StripRay> const& side0, std::vector<StripRay> const& 
   return best;
 }
 
+// A search window per side: border starts (relative to the run's beginning) and ray angles
+// (about the inward normal).
+struct SideWindows {
+  std::array<int, 2> from{}, to{};
+  std::array<double, 2> lo{}, hi{};
+};
+
+// The windows about the previous frame's strip, when both of its sides start within track_px of
+// the run (each searched +-track_px / 2 about its start, +-2 coarse steps about its angle);
+// nullopt otherwise.
+std::optional<SideWindows> trackedWindows(std::vector<cv::Point> const& B, int ib, int len, StripCandidate const& previous,
+                                          Eigen::Vector2d const& inward, StripSearchParams const& p) {
+  int const n = static_cast<int>(B.size());
+  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  int const ext = std::max(p.start_slack_px, p.extend_px);
+  std::array<int, 2> const k_from{-ext, 0}, k_to{len - 1, len - 1 + ext};
+  SideWindows w;
+  for (int s = 0; s < 2; ++s) {
+    double bd = 1e300;
+    int kk = 0;
+    for (int k = k_from[s]; k <= k_to[s]; ++k) {
+      cv::Point const q = B[((ib + k) % n + n) % n];
+      double const d = (Eigen::Vector2d(q.x, q.y) - previous.start[s]).squaredNorm();
+      if (d < bd) {
+        bd = d;
+        kk = k;
+      }
+    }
+    if (bd > p.track_px * p.track_px) return std::nullopt;
+    Eigen::Vector2d const d = previous.dir[s];
+    double const a = std::atan2(inward.x() * d.y() - inward.y() * d.x(), inward.dot(d));
+    w.from[s] = kk - p.track_px / 2;
+    w.to[s] = kk + p.track_px / 2;
+    w.lo[s] = std::max(-amax, a - 2.0 * step);
+    w.hi[s] = std::min(amax, a + 2.0 * step);
+  }
+  return w;
+}
+
+// The strip of a side pair: its sides (full-resolution points and lines, the shaft on their
+// positive side) and the quadrilateral between the rays as its region.
+StripCandidate stripOfPair(Pair const& pr, Seed const& seed, int level, int scale) {
+  StripCandidate out;
+  out.score = pr.score;
+  auto toFull = [&](Eigen::Vector2d const& q) { return toFullRes(q, scale); };
+  SideFit& sf = out.sides;
+  StripRay const* rays[2] = {&pr.a, &pr.b};
+  for (int s = 0; s < 2; ++s) {
+    StripRay const& r = *rays[s];
+    out.start[s] = r.start;
+    out.dir[s] = r.dir;
+    for (double t = 1.0; t <= r.length; t += 1.0) sf.points[s].push_back(toFull(r.start + t * r.dir));
+    Eigen::Vector2d const nrm = -r.out;  // toward the shaft
+    Eigen::Vector2d const p0 = toFull(r.start);
+    sf.lines[s] = Eigen::Vector3d(nrm.x(), nrm.y(), -nrm.dot(p0));
+    sf.inliers += static_cast<int>(sf.points[s].size());
+  }
+  sf.entry = toFull(Eigen::Vector2d(seed.position.x, seed.position.y));
+  setFarEnd(sf);
+  Region& rg = out.region;
+  rg.seed = seed.position;
+  rg.threshold = level;
+  auto pt = [](Eigen::Vector2d const& q) { return cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))); };
+  StripRay const &ba = pr.a, &bb = pr.b;
+  rg.boundary = {pt(ba.start), pt(ba.start + ba.length * ba.dir), pt(bb.start + bb.length * bb.dir), pt(bb.start)};
+  rg.box = cv::boundingRect(rg.boundary);
+  rg.area = static_cast<int>(std::lround(cv::contourArea(rg.boundary)));
+  return out;
+}
+
 }  // namespace
 
 std::optional<StripCandidate> searchStrip(cv::Mat const& feature, cv::Mat const& gx, cv::Mat const& gy,
@@ -450,7 +520,7 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, RayField const
   // side is searched again up to extend_px beyond the run's far end. With the strip of the
   // previous frame, each side is searched only about where it was.
   int const len = seed.width;
-  double const amax = p.max_angle_deg * M_PI / 180.0, step = p.coarse_step_deg * M_PI / 180.0;
+  double const amax = p.max_angle_deg * M_PI / 180.0;
   // (the full searches' sweeps, per side: the extended search walks again only the new starts)
   std::array<SweepCache, 2> walked;
   auto search = [&](std::array<int, 2> const& k_from, std::array<int, 2> const& k_to, int k_step,
@@ -463,40 +533,10 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, RayField const
   };
   std::array<double, 2> const full_lo{-amax, -amax}, full_hi{amax, amax};
   Pair pr;
-  bool tracked = false;
-  if (previous) {
-    int const ext = std::max(p.start_slack_px, p.extend_px);
-    std::array<int, 2> const k_from{-ext, 0}, k_to{len - 1, len - 1 + ext};
-    std::array<int, 2> kk{};
-    bool near = true;
-    for (int s = 0; s < 2 && near; ++s) {
-      double bd = 1e300;
-      for (int k = k_from[s]; k <= k_to[s]; ++k) {
-        cv::Point const q = B[((ib + k) % n + n) % n];
-        double const d = (Eigen::Vector2d(q.x, q.y) - previous->start[s]).squaredNorm();
-        if (d < bd) {
-          bd = d;
-          kk[s] = k;
-        }
-      }
-      near = bd <= p.track_px * p.track_px;
-    }
-    if (near) {
-      tracked = true;
-      std::array<int, 2> t_from{}, t_to{};
-      std::array<double, 2> t_lo{}, t_hi{};
-      for (int s = 0; s < 2; ++s) {
-        Eigen::Vector2d const d = previous->dir[s];
-        double const a = std::atan2(inward.x() * d.y() - inward.y() * d.x(), inward.dot(d));
-        t_from[s] = kk[s] - p.track_px / 2;
-        t_to[s] = kk[s] + p.track_px / 2;
-        t_lo[s] = std::max(-amax, a - 2.0 * step);
-        t_hi[s] = std::min(amax, a + 2.0 * step);
-      }
-      pr = search(t_from, t_to, 1, t_lo, t_hi, 2, false);
-    }
-  }
-  if (!tracked) {
+  std::optional<SideWindows> const near = previous ? trackedWindows(B, ib, len, *previous, inward, p) : std::nullopt;
+  if (near) {
+    pr = search(near->from, near->to, 1, near->lo, near->hi, 2, false);
+  } else {
     int const k_step = std::max(1, len / p.max_starts);
     pr = search({-p.start_slack_px, 0}, {len - 1, len - 1 + p.start_slack_px}, k_step, full_lo, full_hi,
                 p.candidates_per_side, true);
@@ -506,33 +546,7 @@ std::optional<StripCandidate> searchStrip(cv::Mat const& feature, RayField const
     }
   }
   if (pr.score <= 0.0) return std::nullopt;
-  StripRay const* ba = &pr.a;
-  StripRay const* bb = &pr.b;
-  StripCandidate out;
-  out.score = pr.score;
-  auto toFull = [&](Eigen::Vector2d const& q) { return toFullRes(q, scale); };
-  SideFit& sf = out.sides;
-  StripRay const* rays[2] = {ba, bb};
-  for (int s = 0; s < 2; ++s) {
-    StripRay const& r = *rays[s];
-    out.start[s] = r.start;
-    out.dir[s] = r.dir;
-    for (double t = 1.0; t <= r.length; t += 1.0) sf.points[s].push_back(toFull(r.start + t * r.dir));
-    Eigen::Vector2d const nrm = -r.out;  // toward the shaft
-    Eigen::Vector2d const p0 = toFull(r.start);
-    sf.lines[s] = Eigen::Vector3d(nrm.x(), nrm.y(), -nrm.dot(p0));
-    sf.inliers += static_cast<int>(sf.points[s].size());
-  }
-  sf.entry = toFull(Eigen::Vector2d(seed.position.x, seed.position.y));
-  setFarEnd(sf);
-  Region& rg = out.region;
-  rg.seed = seed.position;
-  rg.threshold = level;
-  auto pt = [](Eigen::Vector2d const& q) { return cv::Point(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))); };
-  rg.boundary = {pt(ba->start), pt(ba->start + ba->length * ba->dir), pt(bb->start + bb->length * bb->dir), pt(bb->start)};
-  rg.box = cv::boundingRect(rg.boundary);
-  rg.area = static_cast<int>(std::lround(cv::contourArea(rg.boundary)));
-  return out;
+  return stripOfPair(pr, seed, level, scale);
 }
 
 bool stripAgrees(StripCandidate const& strip, geometry::ApparentContour const& contour, int scale, StripSearchParams const& p) {
