@@ -5,7 +5,6 @@
 #include <cmath>
 #include <limits>
 
-#include "endo_guidance/perception/colour_feature.h"
 
 namespace endo_guidance::perception {
 
@@ -35,91 +34,17 @@ void edgeExtent(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen:
   if (*start > *end) *start = *end = 0.0;
 }
 
-double chromaNearest(cv::Mat const& bgr, Eigen::Vector2d const& q, bool* ok) {
-  int const x = static_cast<int>(std::lround(q.x())), y = static_cast<int>(std::lround(q.y()));
-  *ok = x >= 0 && y >= 0 && x < bgr.cols && y < bgr.rows;
-  if (!*ok) return 0.0;
-  cv::Vec3b const& px = bgr.at<cv::Vec3b>(y, x);
-  return ColourFeature::chroma(px[0], px[1], px[2]);
-}
-
-double median(std::vector<double>& v) {
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
-// The tip along the axis (distance from `entry`), measured as the region's end is in the
-// detection: where the low chroma between the lines (shaft, jaws, and their highlights) gives way
-// to tissue for `run` px. The threshold is halfway between the chroma inside the fitted part and
-// beside it; the search covers t_pred +- reach. nullopt without contrast or samples.
-std::optional<double> tipAlongAxis(cv::Mat const& bgr, geometry::ApparentContour const& c, Eigen::Vector2d const& entry,
-                                   Eigen::Vector2d const& dir, double edge_start, double edge_end, double t_pred, double reach) {
-  Eigen::Vector2d const nrm(-dir.y(), dir.x());
-  auto widthAtT = [&](double t) { return widthAt(c, entry + t * dir); };
-  // Across the axis at t: the lowest of the middle and +-1/4 width (the jaws, narrower than the
-  // shaft, need not cover all three).
-  auto inside = [&](double t, bool* ok) {
-    double const w = widthAtT(t), q = 0.25 * std::max(w, 0.0);
-    Eigen::Vector2d const m = entry + t * dir;
-    double lo = std::numeric_limits<double>::infinity();
-    for (double o : {-q, 0.0, q}) {
-      bool in = false;
-      double const v = chromaNearest(bgr, m + o * nrm, &in);
-      if (in) lo = std::min(lo, v);
-    }
-    *ok = std::isfinite(lo);
-    return *ok ? lo : 0.0;
-  };
-  std::vector<double> vin, vout;
-  for (double t = edge_start; t <= edge_end; t += 4.0) {
-    bool ok = false;
-    double const v = inside(t, &ok);
-    if (ok) vin.push_back(v);
-    double const w = std::max(widthAtT(t), 0.0);
-    Eigen::Vector2d const m = entry + t * dir;
-    for (double side : {-1.0, 1.0}) {
-      double const o = side * (w + 4.0);  // half a width and 4 px beyond each line
-      double const u = chromaNearest(bgr, m + o * nrm, &ok);
-      if (ok) vout.push_back(u);
-    }
-  }
-  if (vin.size() < 5 || vout.size() < 5) return std::nullopt;
-  double const lo = median(vin), hi = median(vout);
-  if (hi - lo < 8.0) return std::nullopt;  // no chroma contrast to measure the end by
-  double const thr = 0.5 * (lo + hi);
-  int const run = 3;
-  int above = 0;
-  double const t0 = std::max(edge_start, t_pred - reach), t1 = t_pred + reach;
-  for (double t = t0; t <= t1; t += 1.0) {
-    bool ok = false;
-    double const v = inside(t, &ok);
-    if (!ok || v > thr) {
-      if (++above >= run) return std::max(t0, t - run);  // the last shaft-like sample
-    } else {
-      above = 0;
-    }
-  }
-  return t1;  // pushed in beyond the search: the rest next frame
-}
-
 }  // namespace
 
-TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
-                        cv::Mat const& bgr, ContourTrackingParams const& tp) {
+TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges) {
   TrackedShaft s;
   s.contour = contour;
   s.edges = edges;
   Eigen::Vector2d const dir = axisDirection(contour);
   edgeExtent(edges, contour.entry_px, dir, &s.edge_start, &s.edge_end);
-  s.tip_distance = std::max(0.0, dir.dot(contour.tip_px - contour.entry_px));
   // (the detection follows each edge to its end, which can lie a fraction of a px beyond the
   // tip the region gave: the tracked extent is cut at the tip)
-  s.edge_end = std::min(s.edge_end, s.tip_distance);
-  s.detected_edge_end = s.edge_end;
-  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(contour, contour.entry_px + s.tip_distance * dir));
-  s.chroma_tip = tipAlongAxis(bgr, contour, contour.entry_px, dir, s.edge_start, s.edge_end, s.tip_distance, reach)
-                     .value_or(s.tip_distance);
-  s.tip_offset = s.tip_distance - s.chroma_tip;
+  s.detected_edge_end = s.edge_end = std::min(s.edge_end, std::max(0.0, dir.dot(contour.tip_px - contour.entry_px)));
   return s;
 }
 
@@ -164,34 +89,13 @@ Eigen::Vector2d trackedEntry(geometry::ImageLine const& ax, Eigen::Vector2d cons
   return e && at_edge ? geometry::footOnLine(ax, *e * sc + Eigen::Vector2d(off, off)) : e0;
 }
 
-// The tip and the fitted extent of `now` (its lines, edges and entry set), from last frame's
-// distances moved by `shift` along the axis (the entry moved, the tip does not move with it).
-// The tip moves as the end of the shaft-like interior along the axis moves (the end of the edges
-// jumps where highlights break them and a wrist continues them), from where the detection put it
-// (tip_offset); without contrast, or beyond the search window, it keeps its position.
-void followTip(TrackedShaft const& prev, TrackedShaft& now, cv::Mat const& bgr, ContourTrackingParams const& tp,
-               Eigen::Vector2d const& entry, Eigen::Vector2d const& dir, double shift, int scale) {
-  geometry::ApparentContour const& c = now.contour;
-  double const edge_start = prev.edge_start + shift, edge_end = prev.edge_end + shift;
-  double const detected_edge_end = prev.detected_edge_end + shift;
-  double const reach = std::max(tp.tip_reach_px, 1.5 * widthAt(c, entry + (prev.tip_distance + shift) * dir));
-  // (searched about the tip, as at the detection: the search returns the first end it meets)
-  auto const tip = tipAlongAxis(bgr, c, entry, dir, edge_start, edge_end, prev.tip_distance + shift, reach);
-  now.chroma_tip = tip ? *tip : prev.chroma_tip + shift;
-  now.tip_offset = prev.tip_offset;
-  now.tip_distance = now.chroma_tip + now.tip_offset;
-  // As in the detection (refineContour), beyond the end of the straight sides only the jaws may
-  // follow, up to 2.5 widths: not pale membranes, as achromatic as metal.
-  double t_start = 0.0, t_sides = 0.0;
-  edgeExtent(now.edges, entry, dir, &t_start, &t_sides);
-  double const end_width = std::max(widthAt(c, entry + t_sides * dir), 2.0 * std::max(1, scale));
-  now.tip_distance = std::min(now.tip_distance, std::max(t_sides + 2.5 * end_width, prev.tip_distance + shift));
-  // The fitted extent is the detection's, cut at the tip (a withdrawal): grown with the tip it
-  // takes in a wrist in line with the shaft, shrunk by the tip's steps it ratchets down on a
-  // still image.
-  now.edge_start = edge_start;
-  now.detected_edge_end = detected_edge_end;
-  now.edge_end = std::max(edge_start + 0.5 * (detected_edge_end - edge_start), std::min(now.tip_distance, detected_edge_end));
+// The fitted extent of `now` (its lines and edges set) from last frame's, moved by `shift` along
+// the axis with the entry: the detection's, cut at the tip (a withdrawal; grown with the tip it
+// would take in a wrist in line with the shaft).
+void moveExtent(TrackedShaft const& prev, TrackedShaft& now, double shift, double tip_distance) {
+  now.edge_start = prev.edge_start + shift;
+  now.detected_edge_end = prev.detected_edge_end + shift;
+  now.edge_end = std::max(now.edge_start + 0.5 * (now.detected_edge_end - now.edge_start), std::min(tip_distance, now.detected_edge_end));
 }
 
 // The detection's shape checks on the followed contour c, and its width against last frame's.
@@ -231,9 +135,11 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   if (dir.dot(axisDirection(pc)) < 0.0) dir = -dir;
   Eigen::Vector2d const entry = trackedEntry(ax, dir, pc.entry_px, fov, scale);
   double const shift = dir.dot(geometry::footOnLine(ax, pc.entry_px) - entry);
-  followTip(prev, now, bgr, tp, entry, dir, shift, scale);
+  // The tip is the detection's, held: last frame's tip moved onto the new axis.
+  double const tip_distance = dir.dot(geometry::footOnLine(ax, pc.tip_px) - entry);
+  moveExtent(prev, now, shift, tip_distance);
   c.entry_px = entry;
-  c.tip_px = entry + now.tip_distance * dir;
+  c.tip_px = entry + tip_distance * dir;
   out.rejection = trackedShapeCheck(c, pc, p, tp);
   if (out.rejection == ContourRejection::kNone) out.shaft = std::move(now);
   return out;

@@ -130,7 +130,7 @@ void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
   if (follow && params_.tracking.detect_every > 1)
-    for (std::size_t i = 0; i < res.contours.size(); ++i) tracked_.push_back(startTrack(res.contours[i], res.edges[i], bgr, params_.tracking));
+    for (std::size_t i = 0; i < res.contours.size(); ++i) tracked_.push_back(startTrack(res.contours[i], res.edges[i]));
   tracked_size_ = bgr.size();
   scale_ = res.scale;
   since_detection_ = 0;

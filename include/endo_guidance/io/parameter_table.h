@@ -138,8 +138,6 @@ void forEachPipelineParam(pipeline::PipelineParams& p, F&& f) {
     S.tracking.max_width_change);
   f(ParamInfo{"segmentation/track_coarse_step_px", 0.5, 100, "px", L::kNo,
               "profile spacing of a tracked line's wide pass (the narrow pass: every 2 px)"}, S.tracking.coarse_step_px);
-  f(ParamInfo{"segmentation/track_tip_reach_px", 0, 1000, "px", L::kNo,
-              "a tracked tip is searched this far (at least 1.5 widths) about last frame's"}, S.tracking.tip_reach_px);
   f(ParamInfo{"segmentation/strip_search", 0, 1, "", L::kSegmentation,
               "seeds whose grown regions all leaked: search the shaft's sides in the feature gradient"}, R.enabled);
   f(ParamInfo{"segmentation/strip_max_angle_deg", 0, 90, "deg", L::kNo,

@@ -22,40 +22,30 @@ struct ContourTrackingParams {
   int detect_every = 1;
   double max_width_change = 0.25;  ///< the shaft's width at the entry may change this much (relative, plus 2 px) per frame
   double coarse_step_px = 6.0;     ///< full-res: profile spacing of the wide pass (the narrow one uses refine_step_px)
-  double tip_reach_px = 24.0;      ///< full-res: the tip is searched this far (at least 1.5 widths) about last frame's
 };
 
 /// A shaft followed from frame to frame: its contour, the sub-pixel edge points behind each
-/// line, and the extent of the edges fitted and the tip along the axis, from the entry.
+/// line, and the extent of the edges fitted along the axis, from the entry.
 struct TrackedShaft {
   geometry::ApparentContour contour;
   std::array<std::vector<Eigen::Vector2d>, 2> edges;
   double edge_start = 0.0;    ///< full-res px from the entry along the axis: where the fitted edges begin
   double edge_end = 0.0;      ///< ... and end (at most the detection's: see trackContour)
   double detected_edge_end = 0.0;  ///< ... where the detection's edges ended
-  double tip_distance = 0.0;  ///< ... the tip's distance
-  double chroma_tip = 0.0;    ///< ... where the low chroma between the lines ends (the tracked measure)
-  double tip_offset = 0.0;    ///< tip_distance - chroma_tip at the detection: the two measures of the
-                              ///< tip differ (open jaws, highlights), by up to 60 px on rendered scenes
 };
 
-/// The tracked state of a shaft found by the detection in `bgr` (its contour and edge points):
-/// the chroma end of the shaft is measured there too, so that tracking follows the tip's motion
-/// while the detection keeps its position.
-TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
-                        cv::Mat const& bgr, ContourTrackingParams const& tracking);
+/// The tracked state of a shaft found by the detection (its contour and edge points).
+TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges);
 
 /// Contour tracking: the shaft of the previous frame found again in `bgr` (full resolution)
 /// without segmenting it. Each contour line is refined as in refineContour() -- a wide sub-pixel
 /// pass about last frame's line, then a narrow one about its result -- over the extent of the
 /// edges fitted at the detection (cut at the tip). The entry moves to where the new axis
-/// leaves the field of view; the tip moves as the end of the low chroma between the lines along
-/// the axis (threshold halfway between the fitted part's chroma and the tissue's beside it),
-/// searched within tip_reach_px (at least 1.5 widths) of last frame's, from where the detection
-/// put it, and at most 2.5 widths beyond the edges found, as in the detection; without that
-/// contrast it keeps its distance. Refused (nullopt, with the reason) when a side has too few edge points
-/// or too large a residual, the lines diverge or cross, or the width jumps: the caller then runs
-/// the full detection.
+/// leaves the field of view; the tip is the detection's, held (last frame's moved onto the new
+/// axis): only a detection frame measures it, so that the tip a servo sees comes from one
+/// estimator, at most detect_every - 1 frames old. Refused (nullopt, with the reason) when a
+/// side has too few edge points or too large a residual, the lines diverge or cross, or the
+/// width jumps: the caller then runs the full detection.
 struct TrackingResult {
   std::optional<TrackedShaft> shaft;
   ContourRejection rejection = ContourRejection::kNone;
