@@ -122,16 +122,16 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
   reduceImage(bgr, scale, small_);  // (image_reduction.h)
   updateFieldOfView();
   SegmentationResult res = detector_->detect({bgr, small_, fov_, fov_area_, scale, trocars, since_detection_ + 1});
-  startTracks(res, detector_->followable(), bgr);
+  startTracks(res, detector_->followable(), bgr.size());
   return res;
 }
 
-void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr) {
+void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Size frame_size) {
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
   if (follow && params_.tracking.detect_every > 1)
     for (std::size_t i = 0; i < res.contours.size(); ++i) tracked_.push_back(startTrack(res.contours[i], res.edges[i]));
-  tracked_size_ = bgr.size();
+  tracked_size_ = frame_size;
   scale_ = res.scale;
   since_detection_ = 0;
 }

@@ -54,8 +54,8 @@ class InstrumentSegmenter {
  private:
   std::optional<SegmentationResult> track(cv::Mat const& bgr);  // nullopt: detect
   void updateFieldOfView();  // on small_, every fov_refresh frames or when its size changes
-  // Follows res's shafts in the next frames when `follow` (contour tracking on).
-  void startTracks(SegmentationResult const& res, bool follow, cv::Mat const& bgr);
+  // Follows res's shafts (of a frame of `frame_size`) in the next frames when `follow` (contour tracking on).
+  void startTracks(SegmentationResult const& res, bool follow, cv::Size frame_size);
 
   SegmentationParams params_;
   std::unique_ptr<ShaftDetector> detector_;
