@@ -36,6 +36,8 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   void onInit() override;
 
  private:
+  bool loadCamera(sim::RenderOptions& ro);
+  void advertise();
   void tick(ros::WallTimerEvent const&);
   sensor_msgs::ImagePtr frameMessage();
 
@@ -61,7 +63,7 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
   cv::Mat scratch_, rendered_;
   std::vector<std::string> arms_;
   std::string prefix_, base_frame_, camera_frame_;
-  double radius_ = 0.004, jaw_length_ = 0.012, breathing_amplitude_ = 0.0, breathing_period_ = 4.0;
+  double rate_ = 25.0, radius_ = 0.004, jaw_length_ = 0.012, breathing_amplitude_ = 0.0, breathing_period_ = 4.0;
   Eigen::Vector3d breathing_direction_ = Eigen::Vector3d(0.2, -1.0, 0.3).normalized();
   int frame_ = 0;
   ros::WallTime start_;
@@ -70,11 +72,24 @@ class EndoscopeSimulatorNodelet : public nodelet::Nodelet {
 void EndoscopeSimulatorNodelet::onInit() {
   nh_ = getNodeHandle();
   pnh_ = getPrivateNodeHandle();
+  sim::RenderOptions ro;
+  if (!loadCamera(ro)) return;
+  renderer_ = std::make_unique<sim::SceneRenderer>(static_cast<int>(info_.width), static_cast<int>(info_.height), ro);
+  advertise();
+  start_ = ros::WallTime::now();
+  timer_ = nh_.createWallTimer(ros::WallDuration(1.0 / rate_), &EndoscopeSimulatorNodelet::tick, this);
+  NODELET_INFO_STREAM("EndoscopeSimulator: " << info_.width << "x" << info_.height << " at " << rate_ << " Hz, " << arms_.size()
+                                             << " arm(s)");
+}
+
+// The camera, the scene's options and the lens distortion's map from the parameters; false
+// (reported) when they are invalid.
+bool EndoscopeSimulatorNodelet::loadCamera(sim::RenderOptions& ro) {
   int width = 640, height = 480;
-  double rate = 25.0, fx = 500, fy = 500, cx = -1, cy = -1;
+  double fx = 500, fy = 500, cx = -1, cy = -1;
   pnh_.param("width", width, 640);
   pnh_.param("height", height, 480);
-  pnh_.param("rate", rate, 25.0);
+  pnh_.param("rate", rate_, 25.0);
   pnh_.param("fx", fx, 500.0);
   pnh_.param("fy", fy, 500.0);
   pnh_.param("cx", cx, (width - 1) / 2.0);
@@ -91,16 +106,15 @@ void EndoscopeSimulatorNodelet::onInit() {
   pnh_.param("camera_xyz", xyz, xyz);
   pnh_.param("camera_rpy", rpy, rpy);
   pnh_.param("arms", arms_, std::vector<std::string>{"arm_0"});
-  sim::RenderOptions ro;
   pnh_.param("black_shafts", ro.black_shafts, false);
   pnh_.param("circular_fov", ro.circular_fov, false);
   pnh_.param("gauze", ro.gauze, false);
   pnh_.param("noise_sigma", ro.noise_sigma, 0.0);
   pnh_.param("jpeg_quality", ro.jpeg_quality, 0);
-  if (width < 64 || height < 48 || !(rate > 0.0) || !(fx > 0.0) || !(fy > 0.0) || !(radius_ > 0.0) || xyz.size() != 3 ||
+  if (width < 64 || height < 48 || !(rate_ > 0.0) || !(fx > 0.0) || !(fy > 0.0) || !(radius_ > 0.0) || xyz.size() != 3 ||
       rpy.size() != 3 || D.size() != 5) {
     NODELET_FATAL("EndoscopeSimulator: bad parameters (size >= 64x48, rate, fx, fy, radius > 0, camera_xyz/rpy of 3, distortion of 5)");
-    return;
+    return false;
   }
   K_ << fx, 0, cx, 0, fy, cy, 0, 0, 1;
   base_to_camera_.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
@@ -124,7 +138,11 @@ void EndoscopeSimulatorNodelet::onInit() {
     cv::undistortPoints(grid, ideal, Kc, D, cv::noArray(), Kc, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 1e-6));
     distortion_map_ = cv::Mat(height, width, CV_32FC2, ideal.data()).clone();
   }
-  renderer_ = std::make_unique<sim::SceneRenderer>(width, height, ro);
+  return true;
+}
+
+// The camera's pose (static tf and truth), the image and truth topics, the occlusion service.
+void EndoscopeSimulatorNodelet::advertise() {
   buffer_ = std::make_unique<tf2_ros::Buffer>();
   listener_ = std::make_unique<tf2_ros::TransformListener>(*buffer_, nh_);
   static_tf_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
@@ -149,9 +167,6 @@ void EndoscopeSimulatorNodelet::onInit() {
         res.message = req.data ? "instruments hidden" : "instruments visible";
         return true;
       });
-  start_ = ros::WallTime::now();
-  timer_ = nh_.createWallTimer(ros::WallDuration(1.0 / rate), &EndoscopeSimulatorNodelet::tick, this);
-  NODELET_INFO_STREAM("EndoscopeSimulator: " << width << "x" << height << " at " << rate << " Hz, " << arms_.size() << " arm(s)");
 }
 
 void EndoscopeSimulatorNodelet::tick(ros::WallTimerEvent const&) {

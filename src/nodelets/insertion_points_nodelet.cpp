@@ -7,6 +7,7 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <std_msgs/Header.h>
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -37,7 +38,20 @@ class InsertionPointsNodelet : public nodelet::Nodelet {
 
  private:
   void infoCb(sensor_msgs::CameraInfoConstPtr const& info);
+  // One message's outputs, built under the lock and published after it.
+  struct Outputs {
+    InstrumentAxisArray::Ptr instruments{new InstrumentAxisArray};
+    InsertionPointArray::Ptr points{new InsertionPointArray};
+    visualization_msgs::MarkerArray::Ptr markers;  // null while nobody listens
+    std::vector<geometry_msgs::TransformStamped> tfs;
+    std::vector<geometry::CylinderPose> poses;  // per reported instrument: its measured axis
+    std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
+  };
   void axesCb(InstrumentAxisArray::ConstPtr const& msg);
+  void checkTimeJump(ros::Time stamp, std::vector<std::string>& warnings);
+  void attachAxes(InstrumentAxisArray const& msg, Outputs& out);
+  void setAxesThrough(std_msgs::Header const& header, Outputs& out) const;
+  void reportPoints(std_msgs::Header const& header, Outputs& out) const;
   void configCb(InsertionPointsConfig& c, uint32_t level);
   bool resetSrv(ResetInsertionPoint::Request& req, ResetInsertionPoint::Response& res);
   bool freezeSrv(FreezeInsertionPoint::Request& req, FreezeInsertionPoint::Response& res);
@@ -144,25 +158,50 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
   }
   std::vector<std::string> warnings;
   if (!pending_warning_.empty()) warnings.push_back(std::move(pending_warning_)), pending_warning_.clear();
-  if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
+  checkTimeJump(msg->header.stamp, warnings);
+  Outputs out;
+  out.instruments->header = out.points->header = msg->header;
+  if (markers_pub_.getNumSubscribers() > 0) {
+    out.markers.reset(new visualization_msgs::MarkerArray);
+    out.markers->markers.push_back(ros_io::deleteAll(msg->header));
+  }
+  attachAxes(*msg, out);
+  last_reports_ = pipeline::reportInsertionPoints(*set_, ros_io::rectifiedK(*info_));
+  setAxesThrough(msg->header, out);
+  reportPoints(msg->header, out);
+  int const next_id = set_->nextId();
+  bool const store_id = next_id != stored_next_id_;
+  stored_next_id_ = next_id;
+  lock.unlock();
+  if (store_id) pnh_.setParam("next_id", next_id);  // only when a point is discovered
+  for (auto const& w : warnings) monitor_->warn(w);
+  if (publish_tf_ && !out.tfs.empty()) tf_->sendTransform(out.tfs);
+  points_pub_.publish(out.points);
+  instruments_pub_.publish(out.instruments);
+  if (out.markers) markers_pub_.publish(out.markers);
+  monitor_->processed(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(), msg->header.stamp);
+}
+
+// A looped bag: stamps going back reset the points (new ids), unless told not to.
+void InsertionPointsNodelet::checkTimeJump(ros::Time stamp, std::vector<std::string>& warnings) {
+  if (!last_stamp_.isZero() && stamp < last_stamp_) {
     char b[64];
-    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - msg->header.stamp).toSec());
+    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - stamp).toSec());
     if (reset_on_time_jump_) set_->resetAll();
     warnings.push_back(std::string("time went backwards (") + b + " s, bag loop?)" +
                        (reset_on_time_jump_ ? ": insertion points reset, new ids from " + std::to_string(set_->nextId()) : ""));
   }
-  last_stamp_ = msg->header.stamp;
-  Eigen::Matrix3d const K = ros_io::rectifiedK(*info_);
+  last_stamp_ = stamp;
+}
+
+// Each valid axis is attached to its insertion point (or kept unattached, or dropped).
+void InsertionPointsNodelet::attachAxes(InstrumentAxisArray const& msg, Outputs& out) {
   std::vector<Eigen::Vector3d> images;
-  pipeline::wellConditionedImages(*set_, K, &images);
+  pipeline::wellConditionedImages(*set_, ros_io::rectifiedK(*info_), &images);
   bool const established = !images.empty();
-  InstrumentAxisArray::Ptr instruments(new InstrumentAxisArray);
-  instruments->header = msg->header;
-  std::map<int, std::vector<Eigen::Vector3d>> attached;  // trocar id -> tips (or axis points) of its shafts
-  std::vector<geometry::CylinderPose> poses;  // per reported instrument: its measured axis
   // (an unstamped message: the tracker assumes 25 Hz; a zero stamp for every message would span no time)
-  double const stamp = msg->header.stamp.isZero() ? std::numeric_limits<double>::quiet_NaN() : msg->header.stamp.toSec();
-  for (auto const& a : msg->axes) {
+  double const stamp = msg.header.stamp.isZero() ? std::numeric_limits<double>::quiet_NaN() : msg.header.stamp.toSec();
+  for (auto const& a : msg.axes) {
     auto const parsed = ros_io::fromMsg(a);
     if (!parsed) {
       monitor_->rejected("invalid Pluecker axis (non-unit direction, moment not orthogonal, or non-finite)");
@@ -172,61 +211,50 @@ void InsertionPointsNodelet::axesCb(InstrumentAxisArray::ConstPtr const& msg) {
     bool keep = true;
     int const id = pipeline::attachAxis(*set_, pose, params_.reject_unattached, established, &keep, stamp);
     if (!keep) continue;
-    InstrumentAxis out = a;
-    out.insertion_point_id = id;
-    out.through_valid = false;  // (set below once this frame's reports are known; zero until then)
-    out.axis_through = PluckerLine();
-    out.covariance_through.fill(0.0);
-    instruments->axes.push_back(out);
-    poses.push_back(pose);
+    InstrumentAxis m = a;
+    m.insertion_point_id = id;
+    m.through_valid = false;  // (set once this frame's reports are known; zero until then)
+    m.axis_through = PluckerLine();
+    m.covariance_through.fill(0.0);
+    out.instruments->axes.push_back(m);
+    out.poses.push_back(pose);
     if (id >= 0)
-      attached[id].push_back(a.tip_valid ? Eigen::Vector3d(a.tip.x, a.tip.y, a.tip.z)
-                                         : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
+      out.attached[id].push_back(a.tip_valid ? Eigen::Vector3d(a.tip.x, a.tip.y, a.tip.z)
+                                             : Eigen::Vector3d(pose.axis.direction().cross(pose.axis.moment())));
   }
-  last_reports_ = pipeline::reportInsertionPoints(*set_, K);
-  bool const markers = markers_pub_.getNumSubscribers() > 0;
-  visualization_msgs::MarkerArray::Ptr mk(new visualization_msgs::MarkerArray);
-  if (markers) mk->markers.push_back(ros_io::deleteAll(msg->header));
-  // Each shaft attached to a located point: its axis through that point (constrained_axis.h).
-  for (std::size_t i = 0; i < instruments->axes.size(); ++i) {
-    InstrumentAxis& m = instruments->axes[i];
-    auto const f = pipeline::axisThroughInsertionPoint(poses[i], m.insertion_point_id, last_reports_,
+}
+
+// Each shaft attached to a located point: its axis through that point (constrained_axis.h).
+void InsertionPointsNodelet::setAxesThrough(std_msgs::Header const& header, Outputs& out) const {
+  for (std::size_t i = 0; i < out.instruments->axes.size(); ++i) {
+    InstrumentAxis& m = out.instruments->axes[i];
+    auto const f = pipeline::axisThroughInsertionPoint(out.poses[i], m.insertion_point_id, last_reports_,
                                                    params_.insertion_points.tracker.point_motion_sigma);
-    if (f && ros_io::setThrough(f->pose, m) && markers)
-      ros_io::appendThroughMarker(mk->markers, msg->header, static_cast<int>(i), *f,
+    if (f && ros_io::setThrough(f->pose, m) && out.markers)
+      ros_io::appendThroughMarker(out.markers->markers, header, static_cast<int>(i), *f,
                                   m.tip_valid ? std::optional<Eigen::Vector3d>(Eigen::Vector3d(m.tip.x, m.tip.y, m.tip.z)) : std::nullopt);
   }
-  InsertionPointArray::Ptr points(new InsertionPointArray);
-  points->header = msg->header;
-  std::vector<geometry_msgs::TransformStamped> tfs;
+}
+
+// The points' message and markers, and a tf frame for each located one.
+void InsertionPointsNodelet::reportPoints(std_msgs::Header const& header, Outputs& out) const {
   for (auto const& r : last_reports_) {
     InsertionPoint p;
     if (!ros_io::toMsg(r, p)) continue;
-    points->points.push_back(p);
-    if (markers) ros_io::appendTrocarMarkers(mk->markers, msg->header, r, attached[r.id]);
+    out.points->points.push_back(p);
+    if (out.markers) ros_io::appendTrocarMarkers(out.markers->markers, header, r, out.attached[r.id]);
     // An ill-conditioned point, or one not yet located along its axes, is not a frame to pivot
     // about: flagged, not guessed.
     if (!r.located) continue;
     geometry_msgs::TransformStamped t;
-    t.header = msg->header;  // the image's stamp and optical frame
+    t.header = header;  // the image's stamp and optical frame
     t.child_frame_id = frame_prefix_ + std::to_string(r.id);
     t.transform.translation.x = r.estimate.position.x();
     t.transform.translation.y = r.estimate.position.y();
     t.transform.translation.z = r.estimate.position.z();
     t.transform.rotation.w = 1.0;  // axes parallel to the optical frame
-    tfs.push_back(t);
+    out.tfs.push_back(t);
   }
-  int const next_id = set_->nextId();
-  bool const store_id = next_id != stored_next_id_;
-  stored_next_id_ = next_id;
-  lock.unlock();
-  if (store_id) pnh_.setParam("next_id", next_id);  // only when a point is discovered
-  for (auto const& w : warnings) monitor_->warn(w);
-  if (publish_tf_ && !tfs.empty()) tf_->sendTransform(tfs);
-  points_pub_.publish(points);
-  instruments_pub_.publish(instruments);
-  if (markers) markers_pub_.publish(mk);
-  monitor_->processed(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(), msg->header.stamp);
 }
 
 bool InsertionPointsNodelet::resetSrv(ResetInsertionPoint::Request& req, ResetInsertionPoint::Response& res) {

@@ -8,6 +8,7 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
+#include <std_msgs/Header.h>
 
 #include <chrono>
 #include <cstdio>
@@ -36,6 +37,9 @@ class SegmentationNodelet : public nodelet::Nodelet {
  private:
   void connectCb();
   void imageCb(sensor_msgs::ImageConstPtr const& image, sensor_msgs::CameraInfoConstPtr const& info);
+  void checkStream(std_msgs::Header const& header, cv::Size size);
+  void updateRectifier(sensor_msgs::CameraInfo const& info);
+  void resetState();
   void pointsCb(InsertionPointArray::ConstPtr const& msg);
   void configCb(SegmentationConfig& config, uint32_t level);
 
@@ -186,43 +190,8 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
   }
   auto const t0 = std::chrono::steady_clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  auto const reset = [this] {
-    segmenter_.setParams(params_.segmentation);  // clears the per-seed memory
-    tracker_.reset();
-  };
-  if (!last_stamp_.isZero() && image->header.stamp < last_stamp_) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - image->header.stamp).toSec());
-    monitor_->warn(std::string("time went backwards (") + b + " s, bag loop?)" + (reset_on_time_jump_ ? ": state reset" : ""));
-    if (reset_on_time_jump_) reset();
-  }
-  last_stamp_ = image->header.stamp;
-  // A new camera mode: what was tracked, and the trocars' images, are in the old pixels.
-  if (cv::Size const size(static_cast<int>(image->width), static_cast<int>(image->height)); size != last_size_) {
-    if (!last_size_.empty()) {
-      monitor_->warn("image size changed " + std::to_string(last_size_.width) + "x" + std::to_string(last_size_.height) +
-                     " -> " + std::to_string(size.width) + "x" + std::to_string(size.height) + ": state reset");
-      reset();
-      // The trocars' images in the new pixels until InsertionPoints sends them: u' + w/2 = s (u + w/2).
-      double const sx = static_cast<double>(size.width) / last_size_.width, sy = static_cast<double>(size.height) / last_size_.height;
-      for (Eigen::Vector3d& x : trocar_images_) {
-        x.x() = sx * (x.x() + 0.5 * x.z()) - 0.5 * x.z();
-        x.y() = sy * (x.y() + 0.5 * x.z()) - 0.5 * x.z();
-        x.normalize();
-      }
-    }
-    last_size_ = size;
-  }
-  // Lens distortion: the lines refitted to the rectified edge points.
-  if (ros_io::hasDistortion(*info)) {
-    if (!rectify_ || info->D != rectified_for_.D || info->K != rectified_for_.K || info->R != rectified_for_.R ||
-        info->P != rectified_for_.P) {
-      rectify_ = ros_io::rectifier(*info);
-      rectified_for_ = *info;
-    }
-  } else {
-    rectify_ = nullptr;
-  }
+  checkStream(image->header, cv::Size(static_cast<int>(image->width), static_cast<int>(image->height)));
+  updateRectifier(*info);
   perception::SegmentationResult seg;
   std::vector<geometry::ApparentContour> contours =
       pipeline::segmentShafts(segmenter_, tracker_, cv->image, trocar_images_, rectify_, params_.segmentation.contours, seg);
@@ -251,6 +220,50 @@ void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, senso
     cv_bridge::CvImage ov(image->header, enc::BGR8, cv->image.clone());
     perception::drawSegmentationOverlay(ov.image, seg, trocar_images_);
     overlay_pub_.publish(ov.toImageMsg());
+  }
+}
+
+void SegmentationNodelet::resetState() {
+  segmenter_.setParams(params_.segmentation);  // clears the per-seed memory
+  tracker_.reset();
+}
+
+// A looped bag (time backwards) or a new camera mode resets what was tracked (caller holds mutex_).
+void SegmentationNodelet::checkStream(std_msgs::Header const& header, cv::Size size) {
+  if (!last_stamp_.isZero() && header.stamp < last_stamp_) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.2f", (last_stamp_ - header.stamp).toSec());
+    monitor_->warn(std::string("time went backwards (") + b + " s, bag loop?)" + (reset_on_time_jump_ ? ": state reset" : ""));
+    if (reset_on_time_jump_) resetState();
+  }
+  last_stamp_ = header.stamp;
+  // A new camera mode: what was tracked, and the trocars' images, are in the old pixels.
+  if (size == last_size_) return;
+  if (!last_size_.empty()) {
+    monitor_->warn("image size changed " + std::to_string(last_size_.width) + "x" + std::to_string(last_size_.height) + " -> " +
+                   std::to_string(size.width) + "x" + std::to_string(size.height) + ": state reset");
+    resetState();
+    // The trocars' images in the new pixels until InsertionPoints sends them: u' + w/2 = s (u + w/2).
+    double const sx = static_cast<double>(size.width) / last_size_.width, sy = static_cast<double>(size.height) / last_size_.height;
+    for (Eigen::Vector3d& x : trocar_images_) {
+      x.x() = sx * (x.x() + 0.5 * x.z()) - 0.5 * x.z();
+      x.y() = sy * (x.y() + 0.5 * x.z()) - 0.5 * x.z();
+      x.normalize();
+    }
+  }
+  last_size_ = size;
+}
+
+// Lens distortion: the lines are refitted to the rectified edge points (the map is rebuilt only
+// when the camera model changes).
+void SegmentationNodelet::updateRectifier(sensor_msgs::CameraInfo const& info) {
+  if (!ros_io::hasDistortion(info)) {
+    rectify_ = nullptr;
+    return;
+  }
+  if (!rectify_ || info.D != rectified_for_.D || info.K != rectified_for_.K || info.R != rectified_for_.R || info.P != rectified_for_.P) {
+    rectify_ = ros_io::rectifier(info);
+    rectified_for_ = info;
   }
 }
 
