@@ -26,8 +26,8 @@ using endo_guidance::test::lineErrorOverItsExtent;
 
 namespace {
 
-// Proposes the connected components of the renderer's exact shaft labels (set per frame), each
-// through maskSides() and the shared contour fit (refineContour()).
+// Proposes the renderer's exact shaft labels (set per frame) as pairs of straight sides
+// (findMaskLinePairs()), each through the shared contour fit (refineContour()).
 class ExactLabelDetector final : public ShaftDetector {
  public:
   explicit ExactLabelDetector(SegmentationParams const& p) : params_(p) {}
@@ -39,17 +39,16 @@ class ExactLabelDetector final : public ShaftDetector {
     cv::Mat shaft;
     cv::resize(labels_full == 1, shaft, frame.fov.mask.size(), 0, 0, cv::INTER_NEAREST);
     shaft.convertTo(feature_, CV_32F, 1.0 / 255.0);
-    res.regions = proposeShaftRegions(feature_, frame.fov, params_.regions.min_area, params_.contours.border_margin);
-    for (std::size_t ri = 0; ri < res.regions.size(); ++ri) {
-      SideFit const sides = maskSides(res.regions[ri], frame.fov, frame.scale, params_.contours);
-      ContourFit const f = sides.rejection == ContourRejection::kNone
-                               ? refineContour(sides, res.regions[ri], frame.fov, frame.bgr, frame.scale, params_.contours)
-                               : ContourFit{};
-      res.region_status.push_back(f.contour ? ContourRejection::kNone : sides.rejection);
+    for (MaskLinePair const& pair : findMaskLinePairs(feature_, frame.fov, frame.scale, params_.contours)) {
+      auto region = regionOf(pair, shaft);
+      if (!region) continue;
+      res.regions.push_back(std::move(*region));
+      ContourFit const f = refineContour(sideFitOf(pair, frame.scale), res.regions.back(), frame.fov, frame.bgr, frame.scale, params_.contours);
+      res.region_status.push_back(f.rejection);
       if (!f.contour) continue;
       res.contours.push_back(onImageAxis(*f.contour));
       res.edges.push_back(f.edges);
-      res.contour_regions.push_back(ri);
+      res.contour_regions.push_back(res.regions.size() - 1);
     }
     std::vector<std::size_t> keys;
     removeDuplicateShafts(res, keys);

@@ -8,6 +8,7 @@
 
 #include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/field_of_view.h"
+#include "endo_guidance/perception/mask_line_pairs.h"
 #include "endo_guidance/perception/region_growing.h"
 #include "endo_guidance/perception/segmentation_params.h"
 #include "endo_guidance/perception/shaft_detector.h"
@@ -41,25 +42,7 @@ class ShaftNet {
   int shaft_ = 1;
 };
 
-/// The learned shaft detector's proposals: the connected components of the network's shaft mask
-/// (p >= 1/2 on the probability resized to the view's size, inside the view; fewer than min_area
-/// pixels dropped). A component that enters the view at several places (shafts whose tips touch,
-/// or that cross) is split between its entries, each pixel to the entry nearest along the
-/// component. Each part is a Region seeded at the middle of its longest run on the view's border
-/// (its entry), or, off the border, at its boundary point nearest to it.
-std::vector<Region> proposeShaftRegions(cv::Mat const& shaft_probability, FieldOfView const& fov, int min_area,
-                                        int border_margin);
-
-/// The side pair of a mask component, for refineContour(): its boundary points off the view's
-/// edge (3 border_margin) and short of the far end by one width (the tip), split by the
-/// component's principal axis (second moments of its outline), one LMedS line per side
-/// ([Rousseeuw87]), oriented toward the shaft. A mask's outline is no chain of straight runs from
-/// the entry (the network's edge wanders by a few px): the principal axis splits it where
-/// following it from the entry does not. Rejection kTooFewPoints when a side has fewer than
-/// min_side_points, kNotStraight when under min_inlier_fraction of them lie on its line.
-SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, ContourLinesParams const& params);
-
-/// The contour on the mask's own sides, where the frame has no edge that agrees with them (a
+/// The contour on the mask's own sides, where the frame has no edges beside them (a
 /// grey shaft on pale tissue, a printed band along the shaft): the side pair's lines refitted by
 /// least squares to its points (rectifyContour(), identity mapping) with `sigma_floor_px` as the
 /// systematic floor of their covariance, ordered as refineContour() orders them, the tip at the
@@ -69,14 +52,10 @@ SideFit maskSides(Region const& region, FieldOfView const& fov, int scale, Conto
 ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
                        double sigma_floor_px);
 
-/// Whether each of the contour's lines lies within gate_px (median) of a different side of the
-/// mask's side pair (SideFit::points): the image edge the fit found is the mask's side.
-bool agreesWithMask(geometry::ApparentContour const& c, SideFit const& sides, double gate_px);
-
-/// The learned shaft detector: the network's shaft-mask components (proposeShaftRegions()), each
-/// one's side pair (maskSides()) through the contour fit (refineContour()) where the frame's
-/// edges are the mask's sides (agreesWithMask()), else on the mask's sides (maskContour()); then
-/// the glare check and the duplicates' removal, as the colour method's.
+/// The learned shaft detector: the network's shaft mask as pairs of straight sides
+/// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the frame's edges
+/// beside the mask's sides), else, where the frame has none there, on the mask's sides
+/// (maskContour()); then the glare check and the duplicates' removal, as the colour method's.
 class LearnedShaftDetector final : public ShaftDetector {
  public:
   /// Loads the model: std::runtime_error if it cannot be.

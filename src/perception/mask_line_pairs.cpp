@@ -1,0 +1,290 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/perception/mask_line_pairs.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "endo_guidance/perception/image_reduction.h"
+
+namespace endo_guidance::perception {
+
+namespace {
+
+constexpr int kAngleBins = 360;       // oriented normals, 1 deg
+constexpr int kVoteSpreadBins = 6;    // a point votes for the lines within 6 deg of its gradient
+constexpr double kMinGradient = 0.05; // probability per px: a weaker step is no side
+constexpr double kGatePx = 2.0;       // a side's points lie this close to its line
+constexpr double kMaxTurnDeg = 20.0;  // ... with their gradient this close to its normal
+constexpr int kEdgeMarginPx = 3;      // the mask's outline along the view's edge is no side
+
+struct Edgel {
+  Eigen::Vector2d x;
+  double angle;  // of the gradient, into the mask
+};
+
+struct Side {
+  Eigen::Vector2d n;  // unit normal into the mask
+  double rho = 0.0;   // n . x = rho on the line
+  double t0 = 0.0, t1 = 0.0;  // extent along (-n.y, n.x)
+  std::vector<Eigen::Vector2d> points;
+  Eigen::Vector2d along() const { return {-n.y(), n.x()}; }
+};
+
+// The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient.
+std::vector<Edgel> maskEdgels(cv::Mat const& prob, FieldOfView const& fov, cv::Mat& smooth) {
+  cv::GaussianBlur(prob, smooth, cv::Size(), 1.0);
+  cv::Mat gx, gy, mask, inner;
+  cv::Sobel(smooth, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(smooth, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::compare(smooth, 0.5, mask, cv::CMP_GE);
+  cv::erode(mask, inner, cv::Mat());
+  std::vector<Edgel> out;
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x) {
+      if (!mask.at<std::uint8_t>(y, x) || inner.at<std::uint8_t>(y, x) || nearViewEdge(fov, cv::Point(x, y), kEdgeMarginPx)) continue;
+      double const u = gx.at<float>(y, x), v = gy.at<float>(y, x), g = std::hypot(u, v);
+      if (g < kMinGradient) continue;
+      // Sub-pixel: out along the gradient to p = 1/2 (first order), at most 1.5 px.
+      double const out_px = std::clamp((smooth.at<float>(y, x) - 0.5) / g, 0.0, 1.5);
+      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), std::atan2(v, u)});
+    }
+  return out;
+}
+
+// Hough accumulator over (normal angle, rho), each point voting about its own gradient only;
+// returns its peaks (angle bin, rho) strongest first.
+std::vector<std::pair<int, int>> houghPeaks(std::vector<Edgel> const& edgels, cv::Size size, double min_votes, int& rho_offset) {
+  rho_offset = static_cast<int>(std::ceil(std::hypot(size.width, size.height))) + 1;
+  cv::Mat acc = cv::Mat::zeros(kAngleBins, 2 * rho_offset + 1, CV_32F);
+  double const bin = 2.0 * M_PI / kAngleBins;
+  std::vector<double> c(kAngleBins), s(kAngleBins);
+  for (int k = 0; k < kAngleBins; ++k) c[k] = std::cos(k * bin), s[k] = std::sin(k * bin);
+  for (Edgel const& e : edgels) {
+    int const k0 = static_cast<int>(std::lround(e.angle / bin));
+    for (int dk = -kVoteSpreadBins; dk <= kVoteSpreadBins; ++dk) {
+      int const k = ((k0 + dk) % kAngleBins + kAngleBins) % kAngleBins;
+      int const r = static_cast<int>(std::lround(e.x.x() * c[k] + e.x.y() * s[k])) + rho_offset;
+      acc.at<float>(k, r) += 1.f;
+    }
+  }
+  cv::Mat smooth, peak;
+  cv::blur(acc, smooth, cv::Size(3, 1));  // rho rounding splits a line's votes between neighbours
+  cv::dilate(smooth, peak, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(9, 9)));
+  std::vector<std::pair<float, std::pair<int, int>>> found;
+  for (int k = 0; k < smooth.rows; ++k)
+    for (int r = 0; r < smooth.cols; ++r)
+      if (float const v = smooth.at<float>(k, r); v >= min_votes && v >= peak.at<float>(k, r)) found.push_back({v, {k, r - rho_offset}});
+  std::sort(found.begin(), found.end(), [](auto const& a, auto const& b) { return a.first > b.first; });
+  std::vector<std::pair<int, int>> out;
+  for (auto const& f : found) out.push_back(f.second);
+  return out;
+}
+
+// Total least squares line through the points, its normal on n's side.
+void fitTls(std::vector<Eigen::Vector2d> const& pts, Eigen::Vector2d& n, double& rho) {
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (auto const& p : pts) mean += p;
+  mean /= static_cast<double>(pts.size());
+  Eigen::Matrix2d S = Eigen::Matrix2d::Zero();
+  for (auto const& p : pts) S += (p - mean) * (p - mean).transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
+  Eigen::Vector2d m = es.eigenvectors().col(0);  // smallest eigenvalue: the normal
+  if (m.dot(n) < 0.0) m = -m;
+  n = m;
+  rho = n.dot(mean);
+}
+
+// The side a peak stands for: the unused points near it, refined.
+bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std::vector<char>& used, int min_points, Side& side) {
+  Eigen::Vector2d n(std::cos(angle), std::sin(angle));
+  double const cos_turn = std::cos(kMaxTurnDeg * M_PI / 180.0);
+  std::vector<int> sel;
+  auto select = [&](double gate) {
+    sel.clear();
+    for (std::size_t i = 0; i < edgels.size(); ++i)
+      if (!used[i] && std::abs(n.dot(edgels[i].x) - rho) <= gate && std::cos(edgels[i].angle - std::atan2(n.y(), n.x())) > cos_turn)
+        sel.push_back(static_cast<int>(i));
+    return static_cast<int>(sel.size()) >= min_points;
+  };
+  if (!select(kGatePx + 0.5)) return false;
+  for (int it = 0; it < 2; ++it) {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i : sel) pts.push_back(edgels[i].x);
+    fitTls(pts, n, rho);
+    if (!select(kGatePx)) return false;
+  }
+  // Every point on the line: the pieces of a side broken by an occluder or a crossing shaft.
+  Eigen::Vector2d const a(-n.y(), n.x());
+  std::sort(sel.begin(), sel.end(), [&](int i, int j) { return a.dot(edgels[i].x) < a.dot(edgels[j].x); });
+  side.points.clear();
+  for (int i : sel) {
+    used[i] = 1;
+    side.points.push_back(edgels[i].x);
+  }
+  side.n = n;
+  fitTls(side.points, side.n, side.rho);
+  side.t0 = side.along().dot(side.points.front());
+  side.t1 = side.along().dot(side.points.back());
+  return true;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// Sides a and b as a shaft: facing, overlapping, apart and with mask between them. The pair with
+// its support, width and the ends of the overlap on its axis; support 0 when they are none.
+MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, double cos_max_angle, int min_points,
+                       double min_width, double min_fill) {
+  MaskLinePair p;
+  if (a.n.dot(b.n) > -cos_max_angle) return p;
+  Eigen::Vector2d const u = a.along();
+  double lo = a.t0, hi = a.t1, blo = 1e300, bhi = -1e300;
+  for (auto const& q : b.points) blo = std::min(blo, u.dot(q)), bhi = std::max(bhi, u.dot(q));
+  lo = std::max(lo, blo), hi = std::min(hi, bhi);
+  if (hi - lo < min_points) return p;
+  std::vector<double> wb, wa;
+  for (auto const& q : b.points)
+    if (double const t = u.dot(q); t >= lo && t <= hi) wb.push_back(a.n.dot(q) - a.rho);
+  for (auto const& q : a.points)
+    if (double const t = u.dot(q); t >= lo && t <= hi) wa.push_back(b.n.dot(q) - b.rho);
+  if (wa.size() < 3 || wb.size() < 3) return p;
+  double const w = median(wb), w2 = median(wa);
+  // (sides that face each other over a shorter stretch than their distance are a blob's, or the
+  // two ends of a shaft's piece)
+  if (!(w >= min_width && w2 >= min_width) || hi - lo < 0.5 * std::max(w, w2)) return p;
+  // The strip between them: samples at 20 stations along, 5 across (its middle 60 %).
+  int inside = 0, total = 0;
+  for (int i = 0; i < 20; ++i)
+    for (int j = 0; j < 5; ++j) {
+      double const t = lo + (hi - lo) * i / 19.0, f = 0.2 + 0.15 * j;
+      Eigen::Vector2d const x = u * t + a.n * (a.rho + f * w);
+      int const xi = static_cast<int>(std::lround(x.x())), yi = static_cast<int>(std::lround(x.y()));
+      ++total;
+      if (xi >= 0 && yi >= 0 && xi < smooth.cols && yi < smooth.rows && smooth.at<float>(yi, xi) >= 0.5f) ++inside;
+    }
+  double const fill = static_cast<double>(inside) / total;
+  if (fill < min_fill) return p;
+  p.sides[0] = {Eigen::Vector3d(a.n.x(), a.n.y(), -a.rho), a.points};
+  p.sides[1] = {Eigen::Vector3d(b.n.x(), b.n.y(), -b.rho), b.points};
+  p.width = 0.5 * (w + w2);
+  p.support = static_cast<double>(std::min(wa.size(), wb.size())) * fill;
+  p.entry = u * lo + a.n * (a.rho + 0.5 * w);
+  p.far = u * hi + a.n * (a.rho + 0.5 * w);
+  return p;
+}
+
+// Where the mask goes on from x along dir (steps of 1 px, gaps up to 3 px) until it leaves the
+// view; returns the last mask point and whether the view's edge was reached.
+std::pair<Eigen::Vector2d, bool> followMask(Eigen::Vector2d x, Eigen::Vector2d const& dir, cv::Mat const& smooth, FieldOfView const& fov) {
+  Eigen::Vector2d last = x;
+  for (int gap = 0, step = 0; gap <= 3 && step < smooth.cols + smooth.rows; ++step) {
+    x += dir;
+    if (!insideView(fov, x) || depthAt(fov, x) <= kEdgeMarginPx) return {last, depthAt(fov, last) <= kEdgeMarginPx + 4};
+    int const xi = static_cast<int>(std::lround(x.x())), yi = static_cast<int>(std::lround(x.y()));
+    if (smooth.at<float>(yi, xi) >= 0.5f) last = x, gap = 0;
+    else ++gap;
+  }
+  return {last, false};
+}
+
+// The entry: the end of the pair whose mask reaches the view's edge (moved there), else the end
+// nearer to the edge.
+void setEntry(MaskLinePair& p, cv::Mat const& smooth, FieldOfView const& fov) {
+  Eigen::Vector2d const u = (p.far - p.entry).normalized();
+  auto const [back, back_edge] = followMask(p.entry, -u, smooth, fov);
+  auto const [ahead, ahead_edge] = followMask(p.far, u, smooth, fov);
+  if (back_edge && !ahead_edge) {
+    p.entry = back;
+  } else if (ahead_edge && !back_edge) {
+    p.far = p.entry;
+    p.entry = ahead;
+  } else if (depthAt(fov, p.far) < depthAt(fov, p.entry)) {
+    std::swap(p.entry, p.far);
+  }
+}
+
+}  // namespace
+
+std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
+                                            ContourLinesParams const& params) {
+  CV_Assert(probability.type() == CV_32F && probability.size() == fov.mask.size() && scale >= 1);
+  cv::Mat smooth;
+  std::vector<Edgel> const edgels = maskEdgels(probability, fov, smooth);
+  int const min_points = std::max(3, params.min_side_points);
+  int rho_offset = 0;
+  std::vector<char> used(edgels.size(), 0);
+  std::vector<Side> sides;
+  double const bin = 2.0 * M_PI / kAngleBins;
+  for (auto const& [k, rho] : houghPeaks(edgels, probability.size(), 0.8 * min_points, rho_offset)) {
+    Side s;
+    if (sideOfPeak(k * bin, rho, edgels, used, min_points, s)) sides.push_back(std::move(s));
+  }
+  double const cos_max = std::cos(params.max_angle_deg * M_PI / 180.0), min_width = params.min_width_px / scale;
+  struct Candidate {
+    MaskLinePair pair;
+    std::size_t a, b;
+  };
+  std::vector<Candidate> candidates;
+  for (std::size_t i = 0; i < sides.size(); ++i)
+    for (std::size_t j = i + 1; j < sides.size(); ++j)
+      if (MaskLinePair p = pairSides(sides[i], sides[j], smooth, cos_max, min_points, min_width, params.min_fill); p.support > 0.0)
+        candidates.push_back({std::move(p), i, j});
+  std::stable_sort(candidates.begin(), candidates.end(), [](auto const& x, auto const& y) { return x.pair.support > y.pair.support; });
+  std::vector<char> taken(sides.size(), 0);
+  std::vector<MaskLinePair> out;
+  for (Candidate& c : candidates) {
+    if (taken[c.a] || taken[c.b]) continue;
+    taken[c.a] = taken[c.b] = 1;
+    setEntry(c.pair, smooth, fov);
+    out.push_back(std::move(c.pair));
+  }
+  return out;
+}
+
+SideFit sideFitOf(MaskLinePair const& pair, int scale) {
+  SideFit fit;
+  double const s = scale, h = 0.5 * (s - 1.0);
+  for (int k = 0; k < 2; ++k) {
+    Eigen::Vector3d const& l = pair.sides[k].line;
+    fit.lines[k] = Eigen::Vector3d(l.x(), l.y(), s * l.z() - h * (l.x() + l.y()));
+    for (auto const& q : pair.sides[k].points) fit.points[k].push_back(toFullRes(q, scale));
+    fit.inliers += static_cast<int>(pair.sides[k].points.size());
+  }
+  fit.entry = toFullRes(pair.entry, scale);
+  fit.far = toFullRes(pair.far, scale);
+  return fit;
+}
+
+std::optional<Region> regionOf(MaskLinePair const& pair, cv::Mat const& mask) {
+  Eigen::Vector2d const u = (pair.far - pair.entry).normalized(), v(-u.y(), u.x());
+  auto onSide = [&](int k, double t) {  // side k on the perpendicular to the axis at t, 2 px out
+    Eigen::Vector3d const& l = pair.sides[k].line;
+    Eigen::Vector2d const c = pair.entry + t * u;
+    double const nv = l.head<2>().dot(v);
+    double a = std::abs(nv) > 0.1 ? -(l.head<2>().dot(c) + l.z()) / nv : 0.0;
+    a += a < 0.0 ? -2.0 : 2.0;
+    Eigen::Vector2d const x = c + a * v;
+    return cv::Point(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
+  };
+  double const t0 = -2.0 * pair.width - 4.0, t1 = (pair.far - pair.entry).norm() + 2.5 * pair.width + 2.0;
+  std::vector<cv::Point> const quad{onSide(0, t0), onSide(0, t1), onSide(1, t1), onSide(1, t0)};
+  cv::Mat strip = cv::Mat::zeros(mask.size(), CV_8U);
+  cv::fillConvexPoly(strip, quad, 255);
+  strip &= mask;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(strip, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  if (contours.empty()) return std::nullopt;
+  Region r;
+  r.boundary = std::move(*std::max_element(contours.begin(), contours.end(), [](auto const& a, auto const& b) { return a.size() < b.size(); }));
+  r.box = cv::boundingRect(r.boundary);
+  r.area = cv::countNonZero(strip(r.box));
+  r.seed = cv::Point(static_cast<int>(std::lround(pair.entry.x())), static_cast<int>(std::lround(pair.entry.y())));
+  return r;
+}
+
+}  // namespace endo_guidance::perception

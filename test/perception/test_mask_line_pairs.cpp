@@ -1,0 +1,130 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+// A shaft mask as pairs of straight sides (mask_line_pairs.h) on exact masks: strips drawn from
+// their two lines, anti-aliased so that p = 1/2 lies on the lines.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/perception/mask_line_pairs.h"
+
+using namespace endo_guidance::perception;
+
+namespace {
+
+constexpr int kW = 320, kH = 240;
+
+// A strip of `width` px about the axis from a to b (b its closed end, a beyond the image when it
+// enters there): its two lines, normals into the strip.
+struct Strip {
+  Eigen::Vector2d a, b;
+  double width;
+  Eigen::Vector2d u() const { return (b - a).normalized(); }
+  Eigen::Vector2d n() const { return {-u().y(), u().x()}; }
+  // Signed distance inside (> 0) of x from each side and from the closed end.
+  double inside(Eigen::Vector2d const& x) const {
+    double const across = 0.5 * width - std::abs(n().dot(x - a)), along = u().dot(b - x);
+    return std::min(across, along);
+  }
+  Eigen::Vector3d line(int k) const {  // k = 0: the side at -n, normal +n; k = 1: at +n, normal -n
+    Eigen::Vector2d const nk = k == 0 ? n() : Eigen::Vector2d(-n());
+    Eigen::Vector2d const on = a - nk * 0.5 * width;
+    return {nk.x(), nk.y(), -nk.dot(on)};
+  }
+};
+
+// p = clamp(1/2 + signed distance inside the union of the strips, 0, 1), less the cut-outs.
+cv::Mat draw(std::vector<Strip> const& strips, std::vector<cv::Rect> const& cuts = {}) {
+  cv::Mat p(kH, kW, CV_32F);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      double d = -1e9;
+      for (auto const& s : strips) d = std::max(d, s.inside(Eigen::Vector2d(x, y)));
+      p.at<float>(y, x) = static_cast<float>(std::clamp(0.5 + d, 0.0, 1.0));
+    }
+  for (auto const& c : cuts) p(c).setTo(0.0f);
+  return p;
+}
+
+FieldOfView fullView() { return detectFieldOfView(cv::Mat(kH, kW, CV_8UC3, cv::Scalar(60, 80, 200))); }
+
+// Whether the pair's two lines are the strip's two lines: each within tol_px of one of them at
+// both of the given stations along the axis, and facing the same way.
+bool pairIsStrip(MaskLinePair const& p, Strip const& s, std::initializer_list<double> stations, double tol_px) {
+  for (int k = 0; k < 2; ++k) {
+    bool matched = false;
+    for (int j = 0; j < 2 && !matched; ++j) {
+      Eigen::Vector3d const l = s.line(j);
+      if (p.sides[k].line.head<2>().dot(l.head<2>()) < std::cos(2.0 * M_PI / 180.0)) continue;
+      matched = true;
+      for (double t : stations) {
+        Eigen::Vector2d const on = s.a + s.u() * t - l.head<2>() * (l.head<2>().dot(s.a + s.u() * t) + l.z());
+        matched = matched && std::abs(p.sides[k].line.dot(on.homogeneous())) <= tol_px;
+      }
+    }
+    if (!matched) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+TEST(MaskLinePairs, AStripEnteringFromTheBorderIsOnePairOnItsSides) {
+  Strip const s{{-20.0, 94.0}, {200.0, 160.0}, 24.0};
+  FieldOfView const fov = fullView();
+  auto const pairs = findMaskLinePairs(draw({s}), fov, 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(pairs[0], s, {60.0, 180.0}, 0.25));
+  EXPECT_NEAR(pairs[0].width, 24.0, 1.5);
+  EXPECT_LE(pairs[0].entry.x(), 8.0);  // the entry at the view's left edge
+  EXPECT_NEAR((pairs[0].far - s.b).norm(), 0.0, 10.0);  // the far end where the sides end
+  // The contour fit's input at full resolution: the same lines through toFullRes() of their points.
+  SideFit const f = sideFitOf(pairs[0], 2);
+  for (int k = 0; k < 2; ++k) {
+    for (auto const& q : pairs[0].sides[k].points)
+      EXPECT_NEAR(f.lines[k].dot(toFullRes(q, 2).homogeneous()), 2.0 * pairs[0].sides[k].line.dot(q.homogeneous()), 1e-9);
+    EXPECT_GT(f.lines[k].dot(toFullRes(0.5 * (s.a + s.b), 2).homogeneous()), 0.0);  // the shaft on the positive side
+  }
+  cv::Mat mask;
+  cv::compare(draw({s}), 0.5, mask, cv::CMP_GE);
+  auto const region = regionOf(pairs[0], mask);
+  ASSERT_TRUE(region);
+  EXPECT_NEAR(region->area, cv::countNonZero(mask), 0.05 * cv::countNonZero(mask));  // the whole strip
+}
+
+TEST(MaskLinePairs, ShaftsTouchingAtTheirTipsArePairedApart) {
+  // One mask component of two shafts in a V: each keeps its own pair of sides.
+  Strip const left{{-20.0, 60.0}, {170.0, 130.0}, 22.0}, bottom{{250.0, 260.0}, {165.0, 128.0}, 26.0};
+  auto const pairs = findMaskLinePairs(draw({left, bottom}), fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 2u);
+  bool const order = pairIsStrip(pairs[0], left, {40.0, 120.0}, 1.0);
+  EXPECT_TRUE(pairIsStrip(pairs[order ? 0 : 1], left, {40.0, 120.0}, 1.0));
+  EXPECT_TRUE(pairIsStrip(pairs[order ? 1 : 0], bottom, {40.0, 110.0}, 1.0));
+}
+
+TEST(MaskLinePairs, CrossingShaftsAreTwoPairs) {
+  Strip const a{{-20.0, 40.0}, {300.0, 200.0}, 20.0}, b{{340.0, 30.0}, {60.0, 230.0}, 24.0};
+  auto const pairs = findMaskLinePairs(draw({a, b}), fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 2u);
+  bool const order = pairIsStrip(pairs[0], a, {60.0, 300.0}, 1.0);
+  EXPECT_TRUE(pairIsStrip(pairs[order ? 0 : 1], a, {60.0, 300.0}, 1.0));
+  EXPECT_TRUE(pairIsStrip(pairs[order ? 1 : 0], b, {60.0, 280.0}, 1.0));
+}
+
+TEST(MaskLinePairs, AShaftBrokenByAThinOccluderIsOnePair) {
+  // A horizontal strip cut across by an 8 px gap (a suture, a thin jaw): two components, one shaft.
+  Strip const s{{-20.0, 120.0}, {260.0, 120.0}, 28.0};
+  auto const pairs = findMaskLinePairs(draw({s}, {cv::Rect(120, 0, 8, kH)}), fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(pairs[0], s, {40.0, 250.0}, 1.0));
+  EXPECT_NEAR(pairs[0].far.x(), 260.0, 10.0);  // beyond the gap
+}
+
+TEST(MaskLinePairs, NothingFromAnEmptyOrThinMask) {
+  ContourLinesParams const p;
+  EXPECT_TRUE(findMaskLinePairs(cv::Mat::zeros(kH, kW, CV_32F), fullView(), 2, p).empty());
+  // Narrower than min_width_px (8 px at full resolution, 4 here): a crease, not a shaft.
+  Strip const thin{{-20.0, 120.0}, {200.0, 100.0}, 3.0};
+  EXPECT_TRUE(findMaskLinePairs(draw({thin}), fullView(), 2, p).empty());
+}
