@@ -3,6 +3,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
@@ -21,7 +22,8 @@ constexpr int kEdgeMarginPx = 3;      // the mask's outline along the view's edg
 
 struct Edgel {
   Eigen::Vector2d x;
-  double angle;  // of the gradient, into the mask
+  Eigen::Vector2d g;  // unit gradient, into the mask
+  double angle;       // its direction
 };
 
 struct Side {
@@ -48,34 +50,44 @@ std::vector<Edgel> maskEdgels(cv::Mat const& prob, FieldOfView const& fov, cv::M
       if (g < kMinGradient) continue;
       // Sub-pixel: out along the gradient to p = 1/2 (first order), at most 1.5 px.
       double const out_px = std::clamp((smooth.at<float>(y, x) - 0.5) / g, 0.0, 1.5);
-      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), std::atan2(v, u)});
+      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), Eigen::Vector2d(u / g, v / g), std::atan2(v, u)});
     }
   return out;
 }
 
 // Hough accumulator over (normal angle, rho), each point voting about its own gradient only;
-// returns its peaks (angle bin, rho) strongest first.
-std::vector<std::pair<int, int>> houghPeaks(std::vector<Edgel> const& edgels, cv::Size size, double min_votes, int& rho_offset) {
-  rho_offset = static_cast<int>(std::ceil(std::hypot(size.width, size.height))) + 1;
-  cv::Mat acc = cv::Mat::zeros(kAngleBins, 2 * rho_offset + 1, CV_32F);
+// returns its peaks (angle bin, rho) strongest first: bins whose votes, summed over 3 rho bins
+// (rounding splits a line's votes between neighbours), are at least min_votes and the most
+// within +-4 rho bins and the votes' spread in angle (so that the spread of a long side forms no
+// peaks of its own). Only the bins voted for are visited.
+std::vector<std::pair<int, int>> houghPeaks(std::vector<Edgel> const& edgels, cv::Size size, double min_votes) {
+  int const offset = static_cast<int>(std::ceil(std::hypot(size.width, size.height))) + 5, R = 2 * offset + 1;
+  std::vector<float> acc(static_cast<std::size_t>(kAngleBins) * R, 0.f);
+  std::vector<int> voted;
   double const bin = 2.0 * M_PI / kAngleBins;
-  std::vector<double> c(kAngleBins), s(kAngleBins);
+  std::array<double, kAngleBins> c{}, s{};
   for (int k = 0; k < kAngleBins; ++k) c[k] = std::cos(k * bin), s[k] = std::sin(k * bin);
   for (Edgel const& e : edgels) {
     int const k0 = static_cast<int>(std::lround(e.angle / bin));
     for (int dk = -kVoteSpreadBins; dk <= kVoteSpreadBins; ++dk) {
       int const k = ((k0 + dk) % kAngleBins + kAngleBins) % kAngleBins;
-      int const r = static_cast<int>(std::lround(e.x.x() * c[k] + e.x.y() * s[k])) + rho_offset;
-      acc.at<float>(k, r) += 1.f;
+      int const i = k * R + static_cast<int>(std::lround(e.x.x() * c[k] + e.x.y() * s[k])) + offset;
+      if (acc[i] == 0.f) voted.push_back(i);
+      acc[i] += 1.f;
     }
   }
-  cv::Mat smooth, peak;
-  cv::blur(acc, smooth, cv::Size(3, 1));  // rho rounding splits a line's votes between neighbours
-  cv::dilate(smooth, peak, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(9, 9)));
+  auto summed = [&](int k, int r) { return acc[k * R + r - 1] + acc[k * R + r] + acc[k * R + r + 1]; };
   std::vector<std::pair<float, std::pair<int, int>>> found;
-  for (int k = 0; k < smooth.rows; ++k)
-    for (int r = 0; r < smooth.cols; ++r)
-      if (float const v = smooth.at<float>(k, r); v >= min_votes && v >= peak.at<float>(k, r)) found.push_back({v, {k, r - rho_offset}});
+  for (int i : voted) {
+    int const k = i / R, r = i % R;
+    float const v = summed(k, r);
+    if (v < 3.0 * min_votes) continue;
+    bool peak = true;
+    for (int dk = -kVoteSpreadBins; dk <= kVoteSpreadBins && peak; ++dk)
+      for (int dr = -4, kk = ((k + dk) % kAngleBins + kAngleBins) % kAngleBins; dr <= 4 && peak; ++dr)
+        peak = summed(kk, r + dr) <= v;
+    if (peak) found.push_back({v, {k, r - offset}});
+  }
   std::sort(found.begin(), found.end(), [](auto const& a, auto const& b) { return a.first > b.first; });
   std::vector<std::pair<int, int>> out;
   for (auto const& f : found) out.push_back(f.second);
@@ -104,8 +116,7 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
   auto select = [&](double gate) {
     sel.clear();
     for (std::size_t i = 0; i < edgels.size(); ++i)
-      if (!used[i] && std::abs(n.dot(edgels[i].x) - rho) <= gate && std::cos(edgels[i].angle - std::atan2(n.y(), n.x())) > cos_turn)
-        sel.push_back(static_cast<int>(i));
+      if (!used[i] && std::abs(n.dot(edgels[i].x) - rho) <= gate && n.dot(edgels[i].g) > cos_turn) sel.push_back(static_cast<int>(i));
     return static_cast<int>(sel.size()) >= min_points;
   };
   if (!select(kGatePx + 0.5)) return false;
@@ -216,11 +227,10 @@ std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfV
   cv::Mat smooth;
   std::vector<Edgel> const edgels = maskEdgels(probability, fov, smooth);
   int const min_points = std::max(3, params.min_side_points);
-  int rho_offset = 0;
   std::vector<char> used(edgels.size(), 0);
   std::vector<Side> sides;
   double const bin = 2.0 * M_PI / kAngleBins;
-  for (auto const& [k, rho] : houghPeaks(edgels, probability.size(), 0.8 * min_points, rho_offset)) {
+  for (auto const& [k, rho] : houghPeaks(edgels, probability.size(), 0.8 * min_points)) {
     Side s;
     if (sideOfPeak(k * bin, rho, edgels, used, min_points, s)) sides.push_back(std::move(s));
   }
