@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/perception/image_reduction.h"
@@ -127,8 +128,6 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
     if (!select(kGatePx)) return false;
   }
   // Every point on the line: the pieces of a side broken by an occluder or a crossing shaft.
-  Eigen::Vector2d const a(-n.y(), n.x());
-  std::sort(sel.begin(), sel.end(), [&](int i, int j) { return a.dot(edgels[i].x) < a.dot(edgels[j].x); });
   side.points.clear();
   for (int i : sel) {
     used[i] = 1;
@@ -136,8 +135,9 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
   }
   side.n = n;
   fitTls(side.points, side.n, side.rho);
-  side.t0 = side.along().dot(side.points.front());
-  side.t1 = side.along().dot(side.points.back());
+  side.t0 = std::numeric_limits<double>::infinity();
+  side.t1 = -side.t0;
+  for (auto const& q : side.points) side.t0 = std::min(side.t0, side.along().dot(q)), side.t1 = std::max(side.t1, side.along().dot(q));
   return true;
 }
 
