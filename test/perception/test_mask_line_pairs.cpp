@@ -93,23 +93,24 @@ TEST(MaskLinePairs, AStripEnteringFromTheBorderIsOnePairOnItsSides) {
   EXPECT_NEAR(region->area, cv::countNonZero(mask), 0.05 * cv::countNonZero(mask));  // the whole strip
 }
 
+namespace {
+// Two strips in one mask: two pairs, each on one strip's sides within 1 px at the two stations.
+void expectTwoStrips(Strip const& a, std::initializer_list<double> at_a, Strip const& b, std::initializer_list<double> at_b) {
+  auto const pairs = findMaskLinePairs(draw({a, b}), fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 2u);
+  bool const first_is_a = pairIsStrip(pairs[0], a, at_a, 1.0);
+  EXPECT_TRUE(pairIsStrip(pairs[first_is_a ? 0 : 1], a, at_a, 1.0));
+  EXPECT_TRUE(pairIsStrip(pairs[first_is_a ? 1 : 0], b, at_b, 1.0));
+}
+}  // namespace
+
 TEST(MaskLinePairs, ShaftsTouchingAtTheirTipsArePairedApart) {
   // One mask component of two shafts in a V: each keeps its own pair of sides.
-  Strip const left{{-20.0, 60.0}, {170.0, 130.0}, 22.0}, bottom{{250.0, 260.0}, {165.0, 128.0}, 26.0};
-  auto const pairs = findMaskLinePairs(draw({left, bottom}), fullView(), 2, ContourLinesParams{});
-  ASSERT_EQ(pairs.size(), 2u);
-  bool const order = pairIsStrip(pairs[0], left, {40.0, 120.0}, 1.0);
-  EXPECT_TRUE(pairIsStrip(pairs[order ? 0 : 1], left, {40.0, 120.0}, 1.0));
-  EXPECT_TRUE(pairIsStrip(pairs[order ? 1 : 0], bottom, {40.0, 110.0}, 1.0));
+  expectTwoStrips({{-20.0, 60.0}, {170.0, 130.0}, 22.0}, {40.0, 120.0}, {{250.0, 260.0}, {165.0, 128.0}, 26.0}, {40.0, 110.0});
 }
 
 TEST(MaskLinePairs, CrossingShaftsAreTwoPairs) {
-  Strip const a{{-20.0, 40.0}, {300.0, 200.0}, 20.0}, b{{340.0, 30.0}, {60.0, 230.0}, 24.0};
-  auto const pairs = findMaskLinePairs(draw({a, b}), fullView(), 2, ContourLinesParams{});
-  ASSERT_EQ(pairs.size(), 2u);
-  bool const order = pairIsStrip(pairs[0], a, {60.0, 300.0}, 1.0);
-  EXPECT_TRUE(pairIsStrip(pairs[order ? 0 : 1], a, {60.0, 300.0}, 1.0));
-  EXPECT_TRUE(pairIsStrip(pairs[order ? 1 : 0], b, {60.0, 280.0}, 1.0));
+  expectTwoStrips({{-20.0, 40.0}, {300.0, 200.0}, 20.0}, {60.0, 300.0}, {{340.0, 30.0}, {60.0, 230.0}, 24.0}, {60.0, 280.0});
 }
 
 TEST(MaskLinePairs, AShaftBrokenByAThinOccluderIsOnePair) {
