@@ -11,7 +11,6 @@
 
 #include "endo_guidance/perception/image_reduction.h"
 #include "endo_guidance/perception/mask_line_pairs.h"
-#include "endo_guidance/perception/rectification.h"
 
 namespace endo_guidance::perception {
 
@@ -93,63 +92,14 @@ cv::Mat ShaftNet::shaftProbability(cv::Mat const& bgr) {
   return prob;
 }
 
-ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
-                       double sigma_floor_px) {
-  ContourFit fit;
-  auto reject = [&](ContourRejection r) {
-    fit.rejection = r;
-    return fit;
-  };
-  Eigen::Vector2d const along = sides.far - sides.entry;
-  std::array<Eigen::Vector2d, 2> dir;
-  for (int k = 0; k < 2; ++k) {
-    dir[k] = Eigen::Vector2d(-sides.lines[k].y(), sides.lines[k].x());
-    if (dir[k].dot(along) < 0.0) dir[k] = -dir[k];
-  }
-  if (std::acos(std::clamp(dir[0].dot(dir[1]), -1.0, 1.0)) > params.max_angle_deg * M_PI / 180.0)
-    return reject(ContourRejection::kNotParallel);
-  Eigen::Vector2d const axis = (dir[0] + dir[1]).normalized();
-  Eigen::Vector2d const left(axis.y(), -axis.x());
-  int const L = sides.lines[0].head<2>().dot(left) < 0.0 ? 0 : 1;  // normal pointing right: the left line
-  if (!(sides.lines[L].head<2>().dot(left) < 0.0 && sides.lines[1 - L].head<2>().dot(left) > 0.0))
-    return reject(ContourRejection::kCrossing);
-  geometry::ApparentContour c;
-  c.lines = {sides.lines[L], sides.lines[1 - L]};
-  c.entry_px = sides.entry;
-  c.tip_px = sides.far;
-  fit.edges = {sides.points[L], sides.points[1 - L]};
-  auto const fitted = rectifyContour(c, fit.edges, [](Eigen::Vector2d const& q) { return q; }, params.min_side_points, sigma_floor_px);
-  if (!fitted) return reject(ContourRejection::kTooFewPoints);
-  c = *fitted;
-  geometry::ImageLine const ax = geometry::imageAxis(c);
-  c.entry_px = geometry::footOnLine(ax, c.entry_px);
-  Eigen::Vector2d const u = (geometry::footOnLine(ax, c.tip_px) - c.entry_px).normalized();
-  double t_tip = u.dot(c.tip_px - c.entry_px);
-  for (cv::Point const& q : region.boundary) {  // the region's end between the lines (its jaws are another class)
-    Eigen::Vector3d const x = toFullRes(Eigen::Vector2d(q.x, q.y), scale).homogeneous();
-    if (c.lines[0].dot(x) >= -scale && c.lines[1].dot(x) >= -scale) t_tip = std::max(t_tip, u.dot(x.head<2>() - c.entry_px));
-  }
-  c.tip_px = c.entry_px + t_tip * u;
-  double const length = (c.tip_px - c.entry_px).norm();
-  double const w_entry = geometry::shaftWidthAt(c, c.entry_px), w_tip = geometry::shaftWidthAt(c, c.tip_px);
-  if (c.residual_px > params.max_residual_px) return reject(ContourRejection::kResidual);
-  if (length < params.min_length_px) return reject(ContourRejection::kTooShort);
-  if (std::min(w_entry, w_tip) < params.min_width_px) return reject(ContourRejection::kTooThin);
-  if (length < params.min_elongation * 0.5 * (w_entry + w_tip)) return reject(ContourRejection::kNotElongated);
-  if (params.max_widening > 0.0 && w_tip > params.max_widening * w_entry) return reject(ContourRejection::kWidens);
-  fit.contour = c;
-  fit.edge_points = static_cast<int>(fit.edges[0].size() + fit.edges[1].size());
-  return fit;
-}
-
 namespace {
-// One side pair's contour: the lines on the frame's edges found beside the mask's sides (the
-// contour fit searches a few px about them), else on the mask's sides; kNone in its rejection
-// when accepted.
+// One side pair's contour on the frame's edges beside the mask's sides (the contour fit searches
+// a few px about them); kNone in its rejection when accepted. Where the frame has no such edges
+// the pair is refused: a line on the mask's own side is a few px off, and on a short shaft that
+// tilts its axis by degrees.
 ContourFit fitPair(SideFit const& sides, Region const& region, DetectionFrame const& frame, ContourLinesParams const& p,
-                   double mask_floor_px, std::vector<geometry::ApparentContour> const& found) {
+                   std::vector<geometry::ApparentContour> const& found) {
   ContourFit f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
-  if (!f.contour) f = maskContour(sides, region, frame.scale, p, mask_floor_px);
   if (f.contour && mostlyGlare(frame.bgr, *f.contour, p)) f.rejection = ContourRejection::kGlare;
   else if (f.contour && duplicatesAShaft(*f.contour, found)) f.rejection = ContourRejection::kDuplicate;
   if (f.rejection != ContourRejection::kNone) f.contour.reset();
@@ -180,16 +130,12 @@ SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
   cv::Mat mask;
   cv::compare(p, 0.5, mask, cv::CMP_GE);
   labels_ = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
-  // A line on the mask's side has the network pixel's quantisation error (pixel / sqrt(12)) as
-  // the systematic floor of its covariance.
-  double const net_px = static_cast<double>(frame.bgr.cols) / prob.cols;
-  double const mask_floor_px = std::max(params_.contours.line_sigma_floor_px, net_px / std::sqrt(12.0));
   for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params_.contours)) {
     if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
     auto region = regionOf(pair, mask);
     if (!region) continue;
     res.regions.push_back(std::move(*region));
-    ContourFit const f = fitPair(sideFitOf(pair, frame.scale), res.regions.back(), frame, params_.contours, mask_floor_px, res.contours);
+    ContourFit const f = fitPair(sideFitOf(pair, frame.scale), res.regions.back(), frame, params_.contours, res.contours);
     res.region_status.push_back(f.rejection);
     if (!f.contour) continue;
     res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)

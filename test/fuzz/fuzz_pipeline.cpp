@@ -1,8 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // The per-frame pipeline on arbitrary images: sizes 1x1 to 1920x1080, every depth and channel
 // count (only 8-bit BGR is accepted, the rest must be refused with an error), content scaled up
-// from a small picture in the input, a few frames in a row, and parameter values the YAML
-// validation accepts. Every output must be finite.
+// from a small picture in the input, a few frames in a row, parameter values the YAML
+// validation accepts, and either detector. Every output must be finite.
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <string>
@@ -79,6 +79,8 @@ extern "C" int LLVMFuzzerTestOneInput(std::uint8_t const* data, std::size_t size
   Eigen::Matrix3d K;
   K << f, 0, w / 2.0, 0, f, h / 2.0, 0, 0, 1;
   if (!K.allFinite() || !(f > 0.0)) return 0;  // the nodes refuse such a camera_info
+  // The learned detector on a quarter of the inputs (read last: inputs that end before keep the colour one).
+  if (in.byte() >= 192) params.segmentation.detector = SegmentationParams::Detector::kLearned;
   Pipeline pipeline(K, cv::Size(w, h), params);
   for (int k = 0; k < frames; ++k) {
     PipelineOutput const out = pipeline.process(image, 0.04 * k);

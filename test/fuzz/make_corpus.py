@@ -63,6 +63,8 @@ def pipeline_seeds():
         b += rng_range(1, 48, pw) + rng_range(1, 36, ph)
         b += picture(pw, ph, shafts, seed).tobytes() + bytes([i & 1]) + real(0.3, 3.0, 0.9)
         write("pipeline", "frame_%d" % i, b)
+        if i < 2:  # the same with the learned detector (its byte comes last)
+            write("pipeline", "frame_%d_learned" % i, b + bytes([255]))
     # a refused type (16-bit, one channel)
     write("pipeline", "mono16", rng_range(1, 1920, 64) + rng_range(1, 1080, 48) + rng_range(0, 5, 2) + rng_range(1, 4, 1) + bytes([3]))
 

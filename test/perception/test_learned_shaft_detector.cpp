@@ -1,7 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 // The learned shaft detector: model loading (good, missing, corrupt), the committed model's
-// output against the training framework's on the same rendered frame, the contour on the sides
-// of an exact mask, and the detector switch of the segmentation.
+// output against the training framework's on the same rendered frame, the lines on the frame's
+// edges beside a coarse mask's sides, and the detector switch of the segmentation.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -125,43 +125,39 @@ TEST(LearnedShaftDetector, CommittedModelGivesTheTrainingFrameworksOutput) {
   EXPECT_EQ(on, total);
 }
 
-TEST(LearnedShaftDetector, ContourOnTheSidesOfAnExactMask) {
-  // A strip entering from the left border of a 320 x 240 view, 20 px wide, to x = 200.
-  cv::Mat bgr(240, 320, CV_8UC3, cv::Scalar(60, 80, 200));
-  FieldOfView const fov = detectFieldOfView(bgr);
-  cv::Mat half = cv::Mat::zeros(120, 160, CV_32F), prob;  // at half the view's size, as a network's
-  cv::rectangle(half, cv::Rect(0, 50, 100, 10), cv::Scalar(1.0), cv::FILLED);
-  cv::resize(half, prob, fov.mask.size(), 0, 0, cv::INTER_LINEAR);
-  ContourLinesParams cp;
+TEST(LearnedShaftDetector, TheLinesAreTheFramesEdgesBesideTheMasksSides) {
+  // A grey shaft entering from the left on red tissue, 640 x 480: rows 200-239 from x = 0 to 399,
+  // its edges at y = 199.5 and 239.5. The mask (processing scale, half) is 3 px too wide each
+  // side, as a coarse network's.
+  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+  bgr(cv::Rect(0, 200, 400, 40)).setTo(cv::Scalar(128, 128, 128));
+  cv::Mat half;
+  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  FieldOfView const fov = detectFieldOfView(half);
+  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F), mask;
+  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);  // rows 98-121: y 195.5-243.5 at full scale
+  cv::compare(prob, 0.5, mask, cv::CMP_GE);
+  ContourLinesParams const cp;
   auto const pairs = findMaskLinePairs(prob, fov, 2, cp);
   ASSERT_EQ(pairs.size(), 1u);
-  SideFit const s = sideFitOf(pairs[0], 2);  // processing -> full resolution: x2
-  for (int k = 0; k < 2; ++k) {
-    EXPECT_NEAR(std::abs(s.lines[k].y()), 1.0, 1e-3);  // horizontal
-    // The shaft (its middle row, 2 x 110 px at full resolution) on the positive side.
-    EXPECT_GT(s.lines[k].dot(Eigen::Vector3d(100, 219.5, 1)), 0.0);
-  }
-  EXPECT_LE(s.entry.x(), 16.0);  // the entry on the left border
-  double const y0 = -s.lines[0].z() / s.lines[0].y(), y1 = -s.lines[1].z() / s.lines[1].y();
-  EXPECT_NEAR(std::abs(y1 - y0), 2.0 * 19.0, 3.0);  // the boundary rows, 19 processing px apart
-  cv::Mat mask;
-  cv::compare(prob, 0.5, mask, cv::CMP_GE);
+  SideFit const sides = sideFitOf(pairs[0], 2);
   auto const region = regionOf(pairs[0], mask);
   ASSERT_TRUE(region);
-  // The contour on the mask's sides: both lines, ordered, the shaft between them, the checks passed.
-  ContourFit const fit = maskContour(s, *region, 2, cp, 1.0);
+  ContourFit const fit = refineContour(sides, *region, fov, bgr, 2, cp);
   ASSERT_TRUE(fit.contour) << toString(fit.rejection);
-  Eigen::Vector3d const inside(100, 219.5, 1);
-  EXPECT_GT(fit.contour->lines[0].dot(inside), 0.0);
-  EXPECT_GT(fit.contour->lines[1].dot(inside), 0.0);
-  EXPECT_NEAR(fit.contour->entry_px.y(), 219.5, 3.0);
-  EXPECT_NEAR(fit.contour->tip_px.x(), 2 * 199 + 0.5, 4.0);  // the strip's end
-  EXPECT_GT(fit.contour->line_covariances[0].trace(), 0.0);
-  EXPECT_EQ(fit.edges[0].size() + fit.edges[1].size(), static_cast<std::size_t>(fit.edge_points));
-  // Too thin to be a shaft: refused, saying why.
-  ContourLinesParams wide = cp;
-  wide.min_width_px = 60.0;
-  EXPECT_EQ(maskContour(s, *region, 2, wide, 1.0).rejection, ContourRejection::kTooThin);
+  for (double y : {199.5, 239.5}) {  // each true edge is one of the lines, at both ends of the shaft
+    double best = 1e9;
+    for (auto const& l : fit.contour->lines)
+      best = std::min(best, std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1)))));
+    EXPECT_LT(best, 0.2) << "edge at y = " << y;
+  }
+  EXPECT_LE(fit.contour->entry_px.x(), 16.0);  // entering at the left border
+  EXPECT_NEAR(fit.contour->tip_px.x(), 399.5, 6.0);
+  // The same mask on a frame with no edges there: refused, saying why (no line on the mask's own sides).
+  cv::Mat const flat(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+  ContourFit const none = refineContour(sides, *region, fov, flat, 2, cp);
+  EXPECT_FALSE(none.contour);
+  EXPECT_NE(none.rejection, ContourRejection::kNone);
 }
 
 TEST(LearnedShaftDetector, DetectorSwitchFindsTheRenderedShafts) {

@@ -42,20 +42,10 @@ class ShaftNet {
   int shaft_ = 1;
 };
 
-/// The contour on the mask's own sides, where the frame has no edges beside them (a
-/// grey shaft on pale tissue, a printed band along the shaft): the side pair's lines refitted by
-/// least squares to its points (rectifyContour(), identity mapping) with `sigma_floor_px` as the
-/// systematic floor of their covariance, ordered as refineContour() orders them, the tip at the
-/// region's farthest point between them along their bisector, and the same
-/// shape checks on length, width, elongation, widening and the angle between the lines.
-/// ContourFit::edges: the side points behind each line (contour order).
-ContourFit maskContour(SideFit const& sides, Region const& region, int scale, ContourLinesParams const& params,
-                       double sigma_floor_px);
-
 /// The learned shaft detector: the network's shaft mask as pairs of straight sides
-/// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the frame's edges
-/// beside the mask's sides), else, where the frame has none there, on the mask's sides
-/// (maskContour()); then the glare check and the duplicates' removal, as the colour method's.
+/// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the lines on the
+/// frame's edges beside the mask's sides; the network proposes, the frame measures); then the
+/// glare check and the duplicates' removal, as the colour method's.
 class LearnedShaftDetector final : public ShaftDetector {
  public:
   /// Loads the model: std::runtime_error if it cannot be.
