@@ -182,6 +182,11 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, doub
   if (fill < min_fill) return p;
   p.sides[0] = {Eigen::Vector3d(a.n.x(), a.n.y(), -a.rho), a.points};
   p.sides[1] = {Eigen::Vector3d(b.n.x(), b.n.y(), -b.rho), b.points};
+  // A side is where it faces the other: beyond, a side's line runs on along a jaw or another shaft.
+  for (auto& side : p.sides) {
+    auto& pts = side.points;
+    pts.erase(std::remove_if(pts.begin(), pts.end(), [&](Eigen::Vector2d const& q) { return u.dot(q) < lo || u.dot(q) > hi; }), pts.end());
+  }
   p.width = 0.5 * (w + w2);
   p.support = static_cast<double>(std::min(wa.size(), wb.size())) * fill;
   p.entry = u * lo + a.n * (a.rho + 0.5 * w);

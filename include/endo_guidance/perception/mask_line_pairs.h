@@ -36,8 +36,10 @@ struct MaskLinePair {
 /// in a Hough transform of oriented lines ([Duda72]) about its own gradient's direction only
 /// ([OGorman76]), so a side's votes do not mix with those of the facing side. Each peak is a
 /// side: its points within 2 px, refined by total least squares. Two sides pair when they face
-/// each other within max_angle_deg, overlap over min_side_points and over their distance, lie
-/// min_width_px apart or more and the strip between them is mask (min_fill); the best supported pairs first, each side used once. Unlike the components of
+/// each other within max_angle_deg, overlap over min_side_points and over half their distance,
+/// lie min_width_px apart or more and the strip between them is mask (min_fill); the best
+/// supported pairs first, each side used once, each keeping its points where the two face each
+/// other (beyond, a side's line runs on along a jaw or another shaft). Unlike the components of
 /// the mask, this keeps shafts that touch or cross apart and joins the pieces of a broken one.
 std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
                                             ContourLinesParams const& params);
