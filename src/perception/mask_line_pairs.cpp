@@ -165,8 +165,8 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, doub
     if (double const t = u.dot(q); t >= lo && t <= hi) wa.push_back(b.n.dot(q) - b.rho);
   if (wa.size() < 3 || wb.size() < 3) return p;
   double const w = median(wb), w2 = median(wa);
-  // (sides that face each other over a shorter stretch than their distance are a blob's, or the
-  // two ends of a shaft's piece)
+  // (sides that face each other over less than half their distance are a blob's, or the two ends
+  // of a shaft's piece)
   if (!(w >= min_width && w2 >= min_width) || hi - lo < 0.5 * std::max(w, w2)) return p;
   // The strip between them: samples at 20 stations along, 5 across (its middle 60 %).
   int inside = 0, total = 0;

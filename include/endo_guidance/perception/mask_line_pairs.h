@@ -15,15 +15,15 @@
 namespace endo_guidance::perception {
 
 /// One straight side of a shaft mask (processing px): its line (a, b, c), a^2 + b^2 = 1, the
-/// normal (a, b) pointing into the mask, and the boundary points behind it.
+/// normal (a, b) pointing into the mask, and its boundary points where it faces the other side.
 struct MaskSide {
   Eigen::Vector3d line = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector2d> points;
 };
 
 /// A shaft in a mask as the two straight sides that face each other across it (processing px).
-/// `entry` and `far`: the ends of their common stretch on the axis between them, the entry the
-/// one nearer to the view's edge.
+/// `entry` and `far`: the ends of their common stretch on the axis between them; the entry is the
+/// end from which the mask runs on to the view's edge (moved there), else the end nearer to it.
 struct MaskLinePair {
   std::array<MaskSide, 2> sides;
   Eigen::Vector2d entry = Eigen::Vector2d::Zero(), far = Eigen::Vector2d::Zero();
