@@ -4,12 +4,12 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <optional>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/perception/contour_checks.h"
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/mask_line_pairs.h"
 
 namespace endo_guidance::perception {

@@ -9,7 +9,9 @@
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
+#include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/learned_shaft_detector.h"
+#include "endo_guidance/perception/mask_line_pairs.h"
 #include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"

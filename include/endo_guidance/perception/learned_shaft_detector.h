@@ -6,10 +6,6 @@
 #include <string>
 #include <vector>
 
-#include "endo_guidance/perception/contour_fit.h"
-#include "endo_guidance/perception/field_of_view.h"
-#include "endo_guidance/perception/mask_line_pairs.h"
-#include "endo_guidance/perception/region_growing.h"
 #include "endo_guidance/perception/segmentation_params.h"
 #include "endo_guidance/perception/shaft_detector.h"
 
