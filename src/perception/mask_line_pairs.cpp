@@ -1,7 +1,6 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "endo_guidance/perception/mask_line_pairs.h"
 
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -9,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "endo_guidance/perception/image_reduction.h"
+#include "endo_guidance/perception/line_fit.h"
 
 namespace endo_guidance::perception {
 
@@ -95,18 +95,13 @@ std::vector<std::pair<int, int>> houghPeaks(std::vector<Edgel> const& edgels, cv
   return out;
 }
 
-// Total least squares line through the points, its normal on n's side.
+// The total least-squares line through the points (fitLineLS()) as (n, rho), its normal on n's side.
 void fitTls(std::vector<Eigen::Vector2d> const& pts, Eigen::Vector2d& n, double& rho) {
-  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (auto const& p : pts) mean += p;
-  mean /= static_cast<double>(pts.size());
-  Eigen::Matrix2d S = Eigen::Matrix2d::Zero();
-  for (auto const& p : pts) S += (p - mean) * (p - mean).transpose();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
-  Eigen::Vector2d m = es.eigenvectors().col(0);  // smallest eigenvalue: the normal
-  if (m.dot(n) < 0.0) m = -m;
-  n = m;
-  rho = n.dot(mean);
+  auto const l = fitLineLS(pts);
+  if (!l) return;
+  double const sign = l->head<2>().dot(n) < 0.0 ? -1.0 : 1.0;
+  n = sign * l->head<2>();
+  rho = -sign * l->z();
 }
 
 // The side a peak stands for: the unused points near it, refined.
