@@ -282,17 +282,21 @@ std::optional<Region> regionOf(MaskLinePair const& pair, cv::Mat const& mask) {
     return cv::Point(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())));
   };
   double const t0 = -2.0 * pair.width - 4.0, t1 = (pair.far - pair.entry).norm() + 2.5 * pair.width + 2.0;
-  std::vector<cv::Point> const quad{onSide(0, t0), onSide(0, t1), onSide(1, t1), onSide(1, t0)};
-  cv::Mat strip = cv::Mat::zeros(mask.size(), CV_8U);
+  std::vector<cv::Point> quad{onSide(0, t0), onSide(0, t1), onSide(1, t1), onSide(1, t0)};
+  // (within the strip's box only: a pair costs its own pixels, not the frame's)
+  cv::Rect const roi = cv::boundingRect(quad) & cv::Rect(cv::Point(0, 0), mask.size());
+  if (roi.empty()) return std::nullopt;
+  for (cv::Point& q : quad) q -= roi.tl();
+  cv::Mat strip = cv::Mat::zeros(roi.size(), CV_8U);
   cv::fillConvexPoly(strip, quad, 255);
-  strip &= mask;
+  strip &= mask(roi);
   std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(strip, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  cv::findContours(strip, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE, roi.tl());
   if (contours.empty()) return std::nullopt;
   Region r;
   r.boundary = std::move(*std::max_element(contours.begin(), contours.end(), [](auto const& a, auto const& b) { return a.size() < b.size(); }));
   r.box = cv::boundingRect(r.boundary);
-  r.area = cv::countNonZero(strip(r.box));
+  r.area = cv::countNonZero(strip(r.box - roi.tl()));
   r.seed = cv::Point(static_cast<int>(std::lround(pair.entry.x())), static_cast<int>(std::lround(pair.entry.y())));
   return r;
 }
