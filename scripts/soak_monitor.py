@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Soak monitor (scripts/soak.sh runs it): drives the servo between two targets and, every
-minute, samples each node's resident memory (and by kind), CPU seconds and stage times, the
+minute, samples each node's resident memory (and by kind), CPU seconds, page faults and stage times, the
 image -> trocar tf latency from the stamp and from the frame's publication (graph; p50, p99) and
-the frames without an instruments message (dropped). The drift verdict is the graph latency's. Writes soak.jsonl, soak.png and a verdict
+the frames without an instruments message (dropped). The drift verdict is the graph latency's, in
+units of one BGR -> HSV conversion timed by this monitor in the same minute. Writes soak.jsonl, soak.png and a verdict
 against the targets (memory growth < 1 MB over the last 20 minutes, p99 drift < 10 %, dropped
 < 0.5 %); exit 1 when one is missed."""
 import argparse
@@ -60,14 +61,27 @@ def memory_kinds_kb(pid):
     return kinds
 
 
-def cpu_s(pid):
-    """User + system CPU time of a process (s)."""
+def cpu_and_faults(pid):
+    """User + system CPU time of a process (s) and its minor page faults: pages the allocator
+    handed back to the kernel and touched again (a frame's worth per frame when it returns frames)."""
     try:
         with open("/proc/%d/stat" % pid) as f:
             fields = f.read().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"), int(fields[7])
     except (OSError, IndexError, ValueError):
         return None
+
+
+def reference_ms(frame, reps=20):
+    """Wall time of one BGR -> HSV conversion of a 640x480 frame (median of reps), the unit of the
+    benchmarks (docs/performance.md): how fast this shared machine runs at this moment."""
+    import cv2
+    t = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
+        t.append(time.perf_counter() - t0)
+    return sorted(t)[reps // 2] * 1e3
 
 
 def node_pids():
@@ -164,18 +178,24 @@ def main():
     with lock:  # the warm-up is not judged
         infos.clear(), seen.clear(), latencies.clear(), shafts.clear(), stops.clear(), located.clear()
         graph.clear(), stages.clear()
-    cpu_before = {n: cpu_s(p) for n, p in node_pids().items()}
+    cpu_before = {n: cpu_and_faults(p) for n, p in node_pids().items()}
+    import cv2
+    import numpy as np
+    cv2.setNumThreads(1)
+    frame = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
     samples = []
     start = time.time()
     k = 0
     jsonl = open(os.path.join(a.out, "soak.jsonl"), "w")
     while not rospy.is_shutdown() and time.time() - start < a.minutes * 60.0:
         minute_end = start + (len(samples) + 1) * 60.0
+        refs = []
         while time.time() < minute_end and not rospy.is_shutdown():  # a new target every 5 s
             t = ServoTarget(mode=0, insertion_point_id=0)
             t.tip.x, t.tip.y, t.tip.z = tips[k % 2]
             target.publish(t)
             k += 1
+            refs.append(reference_ms(frame))
             time.sleep(min(5.0, max(0.0, minute_end - time.time())))
         with lock:
             lat, gra = sorted(latencies), sorted(graph)
@@ -195,15 +215,18 @@ def main():
             shafts.clear(), stops.clear(), located.clear(), stages.clear()
         pids = node_pids()
         rss = {n: rss_kb(p) for n, p in pids.items()}
-        cpu_now = {n: cpu_s(p) for n, p in pids.items()}
-        scene["cpu_s"] = {n: round(c - cpu_before[n], 2) for n, c in cpu_now.items()
-                          if c is not None and cpu_before.get(n) is not None}
+        cpu_now = {n: cpu_and_faults(p) for n, p in pids.items()}
+        both = [n for n, c in cpu_now.items() if c is not None and cpu_before.get(n) is not None]
+        scene["cpu_s"] = {n: round(cpu_now[n][0] - cpu_before[n][0], 2) for n in both}
+        scene["faults_per_frame"] = {n: round((cpu_now[n][1] - cpu_before[n][1]) / max(1, len(done)), 1)
+                                     for n in both if n.endswith("manager")}
         cpu_before = cpu_now
         scene["memory_kinds_kb"] = {n: k for n, k in ((n, memory_kinds_kb(p)) for n, p in pids.items()
                                                       if n.endswith("manager")) if k}
         s = {"minute": len(samples) + 1, "frames": len(done), "dropped": dropped,
              "p50_ms": lat[len(lat) // 2] if lat else None, "p99_ms": lat[int(len(lat) * 0.99)] if lat else None,
              "graph_p50_ms": gra[len(gra) // 2] if gra else None, "graph_p99_ms": gra[int(len(gra) * 0.99)] if gra else None,
+             "reference_ms": sorted(refs)[len(refs) // 2],
              "rss_kb": {n: v for n, v in rss.items() if v is not None}, **scene}
         samples.append(s)
         jsonl.write(json.dumps(s) + "\n")
@@ -217,6 +240,11 @@ def main():
     sys.exit(verdict(samples, a))
 
 
+def relative_p99(s):
+    """The graph's p99 latency in units of the minute's reference operation (one HSV conversion)."""
+    return s["graph_p99_ms"] / s["reference_ms"] if s.get("graph_p99_ms") and s.get("reference_ms") else None
+
+
 def verdict(samples, a):
     import matplotlib
     matplotlib.use("Agg")
@@ -225,7 +253,7 @@ def verdict(samples, a):
         print("[soak] fewer than 2 minutes sampled")
         return 1
     m = [s["minute"] for s in samples]
-    fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
+    fig, ax = plt.subplots(4, 1, figsize=(8, 11), sharex=True)
     for n in sorted(samples[-1]["rss_kb"]):
         ax[0].plot(m, [s["rss_kb"].get(n, float("nan")) / 1024 for s in samples], label=n)
     ax[0].set_ylabel("resident memory (MB)")
@@ -236,9 +264,13 @@ def verdict(samples, a):
     ax[1].plot(m, [s.get("graph_p99_ms") for s in samples], "--", label="p99, from publication")
     ax[1].set_ylabel("image -> trocar tf (ms)")
     ax[1].legend()
-    ax[2].plot(m, [100.0 * s["dropped"] / max(1, s["frames"]) for s in samples])
-    ax[2].set_ylabel("dropped frames (%)")
-    ax[2].set_xlabel("minute")
+    ax[2].plot(m, [relative_p99(s) for s in samples], label="graph p99 / one HSV conversion (judged)")
+    ax[2].plot(m, [s.get("reference_ms") for s in samples], label="one HSV conversion (ms)")
+    ax[2].set_ylabel("ratio; ms")
+    ax[2].legend()
+    ax[3].plot(m, [100.0 * s["dropped"] / max(1, s["frames"]) for s in samples])
+    ax[3].set_ylabel("dropped frames (%)")
+    ax[3].set_xlabel("minute")
     fig.tight_layout()
     fig.savefig(os.path.join(a.out, "soak.png"), dpi=90)
     # Verdicts: memory over the last `window` minutes, p99 drift (last 5 min vs first 5), drops.
@@ -247,26 +279,30 @@ def verdict(samples, a):
     # The drift is the graph's: from the frame's publication (its camera_info's arrival) to the tf.
     # From the stamp, the latency also holds the simulator's rendering, which is the camera's
     # exposure here and costs more or less with where the servo moves the instruments.
-    def drift_of(key):
-        v = [s[key] for s in samples if s.get(key) is not None]
+    # The verdict is on the graph's p99 in units of the minute's reference operation: this machine is
+    # shared, and its speed moves by a quarter within a run (the simulator's CPU per minute too).
+    def drift_of(value):
+        v = [x for x in map(value, samples) if x is not None]
         h, t = v[:5], v[-5:]
         return (h, t, (sorted(t)[len(t) // 2] / sorted(h)[len(h) // 2] - 1.0) if h and t else float("nan"))
-    head, tail, drift = drift_of("graph_p99_ms")
-    stamp_head, stamp_tail, stamp_drift = drift_of("p99_ms")
+    head, tail, drift = drift_of(relative_p99)
+    raw_head, raw_tail, raw_drift = drift_of(lambda s: s.get("graph_p99_ms"))
+    stamp_head, stamp_tail, stamp_drift = drift_of(lambda s: s.get("p99_ms"))
     frames = sum(s["frames"] for s in samples)
     dropped = sum(s["dropped"] for s in samples)
     rate = 100.0 * dropped / max(1, frames)
     worst = max(growth.items(), key=lambda kv: kv[1]) if growth else ("-", 0.0)
     ok = worst[1] < 1.0 and abs(drift) < 0.10 and rate < 0.5
     summary = {"minutes": samples[-1]["minute"], "frames": frames, "dropped": dropped, "dropped_pct": rate,
-               "memory_growth_mb": growth, "p99_first_ms": head, "p99_last_ms": tail, "p99_drift": drift,
+               "memory_growth_mb": growth, "p99_first_hsv": head, "p99_last_hsv": tail, "p99_drift": drift,
+               "p99_first_ms": raw_head, "p99_last_ms": raw_tail, "p99_drift_ms": raw_drift,
                "stamp_p99_first_ms": stamp_head, "stamp_p99_last_ms": stamp_tail, "stamp_p99_drift": stamp_drift, "ok": ok}
     with open(os.path.join(a.out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=1)
-    print("[soak] %d min, %d frames: dropped %.3f %% (< 0.5), graph p99 drift %+.1f %% (< 10; from the stamp, with the "
-          "rendering, %+.1f %%), largest memory growth over the last %d min %.2f MB (%s; < 1): %s" % (
-              summary["minutes"], frames, rate, 100 * drift, 100 * stamp_drift, int(a.window), worst[1], worst[0],
-              "PASS" if ok else "FAIL"))
+    print("[soak] %d min, %d frames: dropped %.3f %% (< 0.5), graph p99 drift %+.1f %% in HSV conversions (< 10; in ms "
+          "%+.1f %%; from the stamp, with the rendering, %+.1f %%), largest memory growth over the last %d min %.2f MB "
+          "(%s; < 1): %s" % (summary["minutes"], frames, rate, 100 * drift, 100 * raw_drift, 100 * stamp_drift,
+                             int(a.window), worst[1], worst[0], "PASS" if ok else "FAIL"))
     return 0 if ok else 1
 
 
