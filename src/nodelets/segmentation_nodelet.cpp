@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cstdio>
 #include <memory>
+#include <atomic>
 #include <mutex>
 
 #include "endo_guidance/ApparentContourArray.h"
@@ -50,13 +51,14 @@ class SegmentationNodelet : public nodelet::Nodelet {
   ros::Publisher contours_pub_;
   ros::Subscriber points_sub_;
   ros::WallTimer watchdog_;
-  ros::WallTime last_frame_;
+  std::atomic<ros::WallTime> last_frame_{ros::WallTime()};  // set by imageCb, read by the watchdog
   std::unique_ptr<dynamic_reconfigure::Server<SegmentationConfig>> reconfigure_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<ros_io::FrameMonitor> monitor_;
 
   std::mutex mutex_;  // guards everything below (image, points and reconfigure callbacks)
-  std::mutex connect_mutex_;
+  std::mutex connect_mutex_;  // the camera subscription (lazy); never taken in imageCb: shutting the
+                              // subscription down waits for a running imageCb (TSan: lock-order cycle)
   int queue_size_ = 2;
   bool reset_on_time_jump_ = true;
   pipeline::PipelineParams params_;
@@ -134,7 +136,7 @@ void SegmentationNodelet::onInit() {
     for (std::string const& t : {topic, topic + "/" + transport})
       if (auto const [lost, why] = ros_io::TransportErrors::instance().take(t); lost > 0)
         monitor_->rejected(std::to_string(lost) + " frame(s) not decoded by the '" + transport + "' transport: " + why);
-    if ((ros::WallTime::now() - last_frame_).toSec() > 3.0)
+    if ((ros::WallTime::now() - last_frame_.load()).toSec() > 3.0)
       monitor_->rejected("no image + camera_info pair for 3 s on '" + camera_sub_.getTopic() + "' and '" + camera_sub_.getInfoTopic() +
                          "': is camera_info published, with the images' stamps?");
   });
@@ -171,10 +173,7 @@ void SegmentationNodelet::pointsCb(InsertionPointArray::ConstPtr const& msg) {
 
 void SegmentationNodelet::imageCb(sensor_msgs::ImageConstPtr const& image, sensor_msgs::CameraInfoConstPtr const& info) {
   monitor_->received();
-  {
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    last_frame_ = ros::WallTime::now();
-  }
+  last_frame_ = ros::WallTime::now();
   namespace enc = sensor_msgs::image_encodings;
   if (image->encoding != enc::BGR8 && image->encoding != enc::RGB8 && image->encoding != enc::BGRA8 &&
       image->encoding != enc::RGBA8)
