@@ -5,8 +5,8 @@
 # that the instrumented nodelets load into them. Leak checking is off (ROS and Python leak at exit).
 # Reports go to build/sanitize/reports/; the verdict to build/sanitize/summary.txt.
 # --thread: the nodelet graph tests (the rostests) under TSan in build/tsan (CMAKE_BUILD_TYPE=
-# ThreadSanitize, libtsan preloaded); races are reported only where our instrumented code takes part
-# (ignore_noninstrumented_modules: ROS' own libraries are not instrumented).
+# ThreadSanitize, libtsan preloaded); the reports wholly inside ROS' uninstrumented libraries are
+# listed, not counted (scripts/tsan_reports.py).
 # Exit 0 only when every test passed and no sanitizer reported anything.
 #   scripts/sanitize.sh [--thread] [-j N] [ctest args...]      e.g. scripts/sanitize.sh -R test_servo
 set -euo pipefail
@@ -56,47 +56,8 @@ pattern='runtime error:|ERROR: AddressSanitizer|AddressSanitizer: CHECK failed|W
 in_log=$(grep -cE "$pattern" "$B/ctest.log" || true)
 n_reports=$(( $(find "$reports" -type f | wc -l) + in_log ))
 if [ "$thread" -eq 1 ]; then
-  # TSan also reports inside ROS' own uninstrumented libraries (roscpp's reference counts are atomics
-  # it cannot see): the verdict counts the reports with a frame in this repository's code; the others
-  # are listed by kind and first function.
-  n_reports=$(/usr/bin/python3 - "$reports" "$PWD" "$B/tsan_outside.txt" <<'PY'
-import collections, glob, re, sys
-reports, repo, outside_file = sys.argv[1:]
-ours, outside = [], collections.Counter()
-for path in sorted(glob.glob(reports + "/*")):
-    text = open(path, errors="replace").read()
-    for block in text.split("==================")[1:]:
-        head = re.search(r"WARNING: ThreadSanitizer: ([a-z -]+)", block)
-        if not head:
-            continue
-        # Each stack's deciding frame: the first past the runtime and inlined headers (/usr/include):
-        # a source line of this repository is ours; a library offset is ROS' (or its templates').
-        kind, sides = head.group(1).strip(), []
-        for stack in re.split(r"\n\s*\n", block):
-            # (function, its source file if known, else its module)
-            frames = [(m.group(1), m.group(2) or m.group(3)) for m in
-                      re.finditer(r"#\d+ (\S+).*? (?:(\S+?):\d+(?::\d+)? )?\((\S+?)\+0x[0-9a-f]+\)$", stack, re.M)]
-            if not frames:
-                continue
-            freed = re.search(r"#0 (operator delete|free)\b", stack) is not None
-            decide = next(((fn, f) for fn, f in frames
-                           if not re.search(r"libsanitizer|libtsan|^/usr/include/", f)), ("?", "?"))
-            sides.append((decide[1].startswith(repo + "/") and not decide[1].startswith(repo + "/build/"), freed, decide[0]))
-        # A message freed by roscpp after its (uninstrumented, so unseen) reference count dropped
-        # races with every earlier read of it: not ours unless both sides are.
-        mine = [m for m, _, _ in sides]
-        if any(mine) and (kind != "data race" or all(mine) or not any(fr and not m for m, fr, _ in sides)):
-            ours.append(block.strip())
-        else:
-            outside[(kind, next((fn for m, _, fn in sides if not m), "?")[:90])] += 1
-with open(outside_file, "w") as f:
-    for (kind, fn), n in outside.most_common():
-        f.write("%5d %s in %s\n" % (n, kind, fn))
-for b in ours[:5]:
-    sys.stderr.write(b[:3000] + "\n==================\n")
-print(len(ours))
-PY
-)
+  # TSan also reports inside ROS' own uninstrumented libraries: only the reports in our code count.
+  n_reports=$(/usr/bin/python3 scripts/tsan_reports.py "$reports" "$PWD" "$B/tsan_outside.txt")
   n_reports=$(( n_reports + in_log ))
 fi
 tests_line="$(grep -E 'tests passed|tests failed' "$B/ctest.log" | tail -1)"
