@@ -1,11 +1,12 @@
 #!/usr/bin/python3
 """Soak monitor (scripts/soak.sh runs it): drives the servo between two targets and, every
-minute, samples each node's resident memory (and by kind), CPU seconds, page faults and stage times, the
-image -> trocar tf latency from the stamp and from the frame's publication (graph; p50, p99) and
-the frames without an instruments message (dropped). The drift verdict is the graph latency's, in
-units of the simulator's CPU time per frame in the same minute (the machine's speed). Writes soak.jsonl, soak.png and a verdict
-against the targets (memory growth < 1 MB over the last 20 minutes, p99 drift < 10 %, dropped
-< 0.5 %); exit 1 when one is missed."""
+minute, samples each node's resident memory (and by kind), CPU seconds, page faults and stage
+times, the image -> trocar tf latency from the stamp and from the frame's publication (graph; p50,
+p99) and the frames without an instruments message (dropped). The drift verdict is the graph
+latency's, in units of the simulator's CPU time per frame in the same minute (the machine's speed).
+Writes soak.jsonl, soak.png and a verdict against the targets (memory growth < 1 MB over the last
+20 minutes, p99 drift < 10 %, dropped < 0.5 %); exit 1 when one is missed. --judge FILE judges a
+recorded soak.jsonl again."""
 import argparse
 import json
 import os
