@@ -10,10 +10,10 @@
 #include <sensor_msgs/image_encodings.h>
 #include <std_msgs/Header.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <memory>
-#include <atomic>
 #include <mutex>
 
 #include "endo_guidance/ApparentContourArray.h"
