@@ -54,12 +54,13 @@ pattern='runtime error:|ERROR: AddressSanitizer|AddressSanitizer: CHECK failed|W
 # Reports go to log_path where the runtime honours it, else to the test's output (rostest nodes,
 # UBSan beside ASan): both are counted.
 in_log=$(grep -cE "$pattern" "$B/ctest.log" || true)
-n_reports=$(( $(find "$reports" -type f | wc -l) + in_log ))
 if [ "$thread" -eq 1 ]; then
   # TSan also reports inside ROS' own uninstrumented libraries: only the reports in our code count.
-  n_reports=$(/usr/bin/python3 scripts/tsan_reports.py "$reports" "$PWD" "$B/tsan_outside.txt")
-  n_reports=$(( n_reports + in_log ))
+  in_files=$(/usr/bin/python3 scripts/tsan_reports.py "$reports" "$PWD" "$B/tsan_outside.txt")
+else
+  in_files=$(find "$reports" -type f | wc -l)
 fi
+n_reports=$(( in_files + in_log ))
 tests_line="$(grep -E 'tests passed|tests failed' "$B/ctest.log" | tail -1)"
 {
   echo "sanitize ($type): $(git rev-parse --short HEAD) $(date -u +%Y-%m-%dT%H:%MZ), ${minutes} min of tests"

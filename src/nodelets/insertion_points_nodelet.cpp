@@ -34,6 +34,12 @@ namespace endo_guidance {
 
 class InsertionPointsNodelet : public nodelet::Nodelet {
  public:
+  // Callbacks first (each shutdown waits for a running one): nodelet may still run them while the
+  // members they read are destroyed (TSan: the diagnostics read the reports during unload).
+  ~InsertionPointsNodelet() override {
+    axes_sub_.shutdown(), info_sub_.shutdown();
+    monitor_.reset();
+  }
   void onInit() override;
 
  private:

@@ -33,6 +33,13 @@ namespace endo_guidance {
 
 class SegmentationNodelet : public nodelet::Nodelet {
  public:
+  // Callbacks first (each shutdown waits for a running one): nodelet may still run them while the
+  // members they read are destroyed.
+  ~SegmentationNodelet() override {
+    watchdog_.stop();
+    camera_sub_.shutdown(), points_sub_.shutdown();
+    monitor_.reset();
+  }
   void onInit() override;
 
  private:
