@@ -31,17 +31,18 @@ std::pair<double, double> extentOn(Eigen::Vector3d const& line, std::vector<Eige
 // (a highlight, JPEG, a touching blob) back to the entry and on: a longer baseline.
 std::variant<RefinedLine, ContourRejection> refineSide(SideFit const& sides, int s, cv::Mat const& bgr, ContourLinesParams const& p) {
   auto const [t0, t1] = extentOn(sides.lines[s], sides.points[s]);
+  ColourDirection const* dir = sides.colour_direction[s] ? &*sides.colour_direction[s] : nullptr;
   ContourLinesParams wide = widePass(p);
   wide.max_residual_px = 1e9;
-  auto const r0 = refineLineProfiles(bgr, sides.lines[s], t0 + 2.0, t1 - 2.0, wide, &sides.scored[s], nullptr);
+  auto const r0 = refineLineProfiles(bgr, sides.lines[s], t0 + 2.0, t1 - 2.0, wide, dir ? nullptr : &sides.scored[s], nullptr, dir);
   if (!r0) return ContourRejection::kWeakEdges;
-  auto r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p);
+  auto r = refineLineSubpixel(bgr, r0->line, t0 + 2.0, t1 - 2.0, p, dir);
   if (!r) return ContourRejection::kWeakEdges;
   if (r->residual_px > p.max_residual_px) return ContourRejection::kResidual;
   Eigen::Vector2d const dr(-r->line.y(), r->line.x());
   double const te = dr.dot(geometry::footOnLine(r->line, sides.entry)), tf = dr.dot(geometry::footOnLine(r->line, sides.far));
   double const inf = std::numeric_limits<double>::infinity();
-  if (auto const x = extendLineSubpixel(bgr, *r, t0 + 2.0, t1 - 2.0, tf > te ? te : -inf, tf > te ? inf : te, p)) r = x;
+  if (auto const x = extendLineSubpixel(bgr, *r, t0 + 2.0, t1 - 2.0, tf > te ? te : -inf, tf > te ? inf : te, p, dir)) r = x;
   return *r;
 }
 

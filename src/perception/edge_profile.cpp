@@ -9,6 +9,7 @@
 #endif
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -195,8 +196,8 @@ namespace {
 // reused).
 class EdgeProfiler {
  public:
-  EdgeProfiler(cv::Mat const& bgr, ContourLinesParams const& p)
-      : bgr_(bgr), p_(p), h_(p.refine_halfwidth_px), ds_(p.profile_step_px),
+  EdgeProfiler(cv::Mat const& bgr, ContourLinesParams const& p, ColourDirection const* direction)
+      : bgr_(bgr), p_(p), direction_(direction), h_(p.refine_halfwidth_px), ds_(p.profile_step_px),
         ns_(static_cast<int>(std::lround(2.0 * h_ / ds_)) + 1), prof_(static_cast<std::size_t>(ns_)) {}
 
   // The edge on the profile across `line` at t along its direction (-b, a); nullopt when the
@@ -212,7 +213,8 @@ class EdgeProfiler {
     if (!(std::min(a.x(), b.x()) >= 0.0 && std::min(a.y(), b.y()) >= 0.0 && std::max(a.x(), b.x()) < xmax &&
           std::max(a.y(), b.y()) < ymax))
       return std::nullopt;
-    sampleEdgeChannel(bgr_, a, ds_ * n, ns_, prof_.data());
+    if (direction_) sampleProjection(a, ds_ * n);
+    else sampleEdgeChannel(bgr_, a, ds_ * n, ns_, prof_.data());
     // The edge is located in the edge channel, where the shaded rim of a grey shaft does not bias
     // it (metal mirrors tissue colours, so it is the steepest descent, not the first seen from inside).
     auto const at = steepestDescent(prof_, ds_, p_.min_edge_contrast * 2.0 * ds_, p_.edge_lobe_floor);
@@ -221,8 +223,24 @@ class EdgeProfiler {
   }
 
  private:
+  // The colour along direction_ at a + i d, bilinear as edgeAt() (every sample inside the image).
+  void sampleProjection(Eigen::Vector2d const& a, Eigen::Vector2d const& d) {
+    for (int i = 0; i < ns_; ++i) {
+      double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
+      int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+      float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+      std::uint8_t const* p0 = bgr_.ptr<std::uint8_t>(y0) + 3 * x0;
+      std::uint8_t const* p1 = bgr_.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
+      float v = 0.f;
+      for (int k = 0; k < 3; ++k)
+        v += (*direction_)[k] * ((1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]));
+      prof_[static_cast<std::size_t>(i)] = v;
+    }
+  }
+
   cv::Mat const& bgr_;
   ContourLinesParams const& p_;
+  ColourDirection const* direction_;
   double const h_, ds_;
   int const ns_;
   std::vector<float> prof_;
@@ -233,9 +251,10 @@ class EdgeProfiler {
 // parameters at t0 + i step (step a multiple of refine_step_px), used where the line and t0 are
 // exactly the same; `record`: where to keep every profile's edge.
 std::vector<Eigen::Vector2d> subpixelEdgePoints(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
-                                               ContourLinesParams const& p, ProfileEdges const* reuse = nullptr,
-                                               ProfileEdges* record = nullptr) {
-  EdgeProfiler profiler(bgr, p);
+                                               ContourLinesParams const& p, ColourDirection const* direction,
+                                               ProfileEdges const* reuse = nullptr, ProfileEdges* record = nullptr) {
+  CV_Assert(!(direction && reuse));  // (the profiles reused are edgeChannel()'s)
+  EdgeProfiler profiler(bgr, p, direction);
   std::vector<Eigen::Vector2d> pts;
   double const step = p.refine_step_px;
   // Every m-th profile is one of `reuse`'s: the same t exactly (integer multiples of the steps).
@@ -302,24 +321,49 @@ std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pt
 }  // namespace
 
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
-                                              ContourLinesParams const& p) {
-  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p), line, p);
+                                              ContourLinesParams const& p, ColourDirection const* direction) {
+  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p, direction), line, p);
 }
 
 std::optional<RefinedLine> refineLineProfiles(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1, ContourLinesParams const& p,
-                                              ProfileEdges const* reuse, ProfileEdges* record) {
-  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p, reuse, record), line, p);
+                                              ProfileEdges const* reuse, ProfileEdges* record, ColourDirection const* direction) {
+  return robustEdgeLine(subpixelEdgePoints(bgr, line, t0, t1, p, direction, reuse, record), line, p);
+}
+
+std::optional<ColourDirection> sideColourDirection(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
+                                                   double inside_px, double outside_px) {
+  CV_Assert(bgr.type() == CV_8UC3);
+  Eigen::Vector2d const n = line.head<2>(), d(-n.y(), n.x()), o = -line.z() * n;
+  std::array<std::vector<float>, 3> in, out;
+  for (double t = t0; t <= t1; t += 2.0)
+    for (double const depth : {inside_px, -outside_px}) {
+      Eigen::Vector2d const x = o + t * d + depth * n;
+      int const xi = static_cast<int>(std::lround(x.x())), yi = static_cast<int>(std::lround(x.y()));
+      if (xi < 0 || yi < 0 || xi >= bgr.cols || yi >= bgr.rows) continue;
+      cv::Vec3b const c = bgr.at<cv::Vec3b>(yi, xi);
+      for (int k = 0; k < 3; ++k) (depth > 0.0 ? in : out)[k].push_back(c[k]);
+    }
+  if (in[0].size() < 3 || out[0].size() < 3) return std::nullopt;
+  auto median = [](std::vector<float>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  ColourDirection w;
+  for (int k = 0; k < 3; ++k) w[k] = median(out[k]) - median(in[k]);
+  if (!(w.norm() >= 1.0)) return std::nullopt;  // (a grey level: no direction)
+  return ColourDirection(w.normalized());
 }
 
 std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
-                                              double t_lo, double t_hi, ContourLinesParams const& p) {
+                                              double t_lo, double t_hi, ContourLinesParams const& p,
+                                              ColourDirection const* direction) {
   if (p.extend_max_misses <= 0 || refined.inliers.empty()) return std::nullopt;
   geometry::ImageLine l = refined.line;
   std::vector<Eigen::Vector2d> pts = refined.inliers;
   // An edge point continues the line within 3 of its residuals (at least gate_min px).
   double const gate = std::max(3.0 * refined.residual_px, p.extend_gate_px);
   std::size_t const before = pts.size();
-  EdgeProfiler profiler(bgr, p);
+  EdgeProfiler profiler(bgr, p, direction);
   for (int dir : {1, -1}) {
     double t = dir > 0 ? t1 : t0;
     int misses = 0, added = 0;

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -94,12 +95,26 @@ cv::Mat ShaftNet::shaftProbability(cv::Mat const& bgr) {
 
 namespace {
 // One side pair's contour on the frame's edges beside the mask's sides (the contour fit searches
-// a few px about them); kNone in its rejection when accepted. Where the frame has no such edges
-// the pair is refused: a line on the mask's own side is a few px off, and on a short shaft that
-// tilts its axis by degrees.
-ContourFit fitPair(SideFit const& sides, Region const& region, DetectionFrame const& frame, ContourLinesParams const& p,
+// a few px about them); kNone in its rejection when accepted. The edges are sought in the chroma
+// first (edgeChannel(): shafts are greyer than tissue); a side without edges there is sought
+// along its own colour direction (sideColourDirection(): the shaft's colour to the tissue's
+// across the mask's side), as grey fat and membrane are as grey as a shaft. Where the frame has
+// no edges either way the pair is refused: a line on the mask's own side is a few px off, and on
+// a short shaft that tilts its axis by degrees.
+ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionFrame const& frame, ContourLinesParams const& p,
                    std::vector<geometry::ApparentContour> const& found) {
   ContourFit f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
+  if (f.rejection == ContourRejection::kWeakEdges) {
+    // The samples: inside the shaft by under a third of its width, outside beyond the mask's error.
+    double const inside = std::clamp(0.3 * width, 2.0, 6.0), outside = 5.0;
+    for (int k = 0; k < 2; ++k) {
+      Eigen::Vector2d const d(-sides.lines[k].y(), sides.lines[k].x());
+      double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+      for (auto const& q : sides.points[k]) t0 = std::min(t0, d.dot(q)), t1 = std::max(t1, d.dot(q));
+      sides.colour_direction[k] = sideColourDirection(frame.bgr, sides.lines[k], t0, t1, inside, outside);
+    }
+    if (sides.colour_direction[0] || sides.colour_direction[1]) f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
+  }
   if (f.contour && mostlyGlare(frame.bgr, *f.contour, p)) f.rejection = ContourRejection::kGlare;
   else if (f.contour && duplicatesAShaft(*f.contour, found)) f.rejection = ContourRejection::kDuplicate;
   if (f.rejection != ContourRejection::kNone) f.contour.reset();
@@ -121,31 +136,39 @@ void LearnedShaftDetector::setParams(SegmentationParams const& p) {
   params_ = p;
 }
 
-SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
+SegmentationResult shaftsOfProbability(DetectionFrame const& frame, cv::Mat const& probability, SegmentationParams const& params,
+                                       cv::Mat& labels) {
+  CV_Assert(probability.type() == CV_32F && probability.size() == frame.fov.mask.size());
   SegmentationResult res;
   res.scale = frame.scale;
-  cv::Mat const prob = net_->shaftProbability(frame.bgr);
-  cv::Mat p;  // at the processing scale
-  cv::resize(prob, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  cv::Mat const& p = probability;
   cv::Mat mask;
   cv::compare(p, 0.5, mask, cv::CMP_GE);
-  labels_ = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
-  for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params_.contours)) {
-    if (static_cast<int>(res.contours.size()) >= params_.regions.max_regions) break;
+  labels = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
+  for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours)) {
+    if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
     auto region = regionOf(pair, mask);
     if (!region) continue;
     res.regions.push_back(std::move(*region));
-    ContourFit const f = fitPair(sideFitOf(pair, frame.scale), res.regions.back(), frame, params_.contours, res.contours);
+    ContourFit const f = fitPair(sideFitOf(pair, frame.scale), pair.width * frame.scale, res.regions.back(), frame, params.contours,
+                                 res.contours);
     res.region_status.push_back(f.rejection);
     if (!f.contour) continue;
     res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)
     res.edges.push_back(f.edges);
     res.contour_regions.push_back(res.regions.size() - 1);
-    cv::drawContours(labels_, std::vector<std::vector<cv::Point>>{res.regions.back().boundary}, 0,
+    cv::drawContours(labels, std::vector<std::vector<cv::Point>>{res.regions.back().boundary}, 0,
                      cv::Scalar(static_cast<int>(res.contours.size())), cv::FILLED);
   }
   std::vector<std::size_t> none;
   removeDuplicateShafts(res, none);
+  return res;
+}
+
+SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
+  cv::Mat p;  // at the processing scale
+  cv::resize(net_->shaftProbability(frame.bgr), p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  SegmentationResult res = shaftsOfProbability(frame, p, params_, labels_);
   p.convertTo(feature_, CV_8U, -255.0, 255.0);  // low on shafts, as the colour feature
   return res;
 }

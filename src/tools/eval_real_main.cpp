@@ -38,6 +38,7 @@
 #include "hough_baseline.h"
 #include "shaft_scoring.h"
 #include "tool_util.h"
+#include "endo_guidance/perception/learned_shaft_detector.h"
 #include "endo_guidance/perception/segmentation.h"
 
 namespace fs = std::filesystem;
@@ -83,6 +84,35 @@ constexpr int kSkipped = 77;            // exit status when the data is absent (
 constexpr int kStrictMinPx = 300;        // in-vivo: a mask shaft is an instance with this much class 160
 constexpr int kStrictRoboticMinPx = 500; // robotic: one shaft per connected component of this much
 bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
+bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated shaft mask (in-vivo stills)
+
+// The learned detector's stage after its network (shaftsOfProbability()) fed the annotated shaft
+// mask, reduced to the network's input size and back as the network's output is: what the line
+// stage makes of a perfect mask, the ceiling of any network at that size.
+class AnnotatedMaskDetector final : public ShaftDetector {
+ public:
+  AnnotatedMaskDetector(SegmentationParams const& p, cv::Size net_size) : params_(p), net_size_(net_size) {}
+  void setMask(cv::Mat const& shaft) { shaft_ = shaft; }  // CV_8U, non-zero on shaft pixels (full resolution)
+  std::unique_ptr<ShaftDetector> clone() const override { return std::make_unique<AnnotatedMaskDetector>(*this); }
+  SegmentationResult detect(DetectionFrame const& frame) override {
+    cv::Mat small, p;
+    cv::resize(shaft_, small, net_size_, 0, 0, cv::INTER_AREA);
+    small.convertTo(small, CV_32F, 1.0 / 255.0);
+    cv::resize(small, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+    p.convertTo(feature_, CV_8U, -255.0, 255.0);
+    return shaftsOfProbability(frame, p, params_, labels_);
+  }
+  bool followable() const override { return true; }
+  void setParams(SegmentationParams const& p) override { params_ = p; }
+  void reset() override {}
+  cv::Mat const& feature() const override { return feature_; }
+  cv::Mat const& labels() const override { return labels_; }
+
+ private:
+  SegmentationParams params_;
+  cv::Size net_size_;
+  cv::Mat shaft_, feature_, labels_;
+};
 
 struct InvivoChecks {
   double min_found = -1.0, max_line_px = -1.0, max_false_per_image = -1.0;
@@ -113,7 +143,13 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     for (auto const& e : fs::directory_iterator(raw)) files.push_back(e.path());
   }
   std::sort(files.begin(), files.end());
-  InstrumentSegmenter seg(sp);
+  AnnotatedMaskDetector* oracle = nullptr;
+  InstrumentSegmenter seg = [&] {
+    if (!annotated_mask) return InstrumentSegmenter(sp);
+    auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model).inputSize());
+    oracle = d.get();
+    return InstrumentSegmenter(sp, std::move(d));
+  }();
   for (auto const& f : files) {
     cv::Mat const im = cv::imread(f.string(), cv::IMREAD_COLOR);
     std::string name = f.filename().string();
@@ -126,6 +162,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     }
     ++st.images;
     seg.reset();  // stills: no temporal state
+    if (oracle) oracle->setMask(cls == 160);
     SegmentationResult r = seg.process(im);
     if (baseline) {
       r.contours = detectShaftsHough(im);
@@ -687,6 +724,7 @@ int main(int argc, char** argv) {
     else if (a == "--invivo-only") robotic = false;
     else if (a == "--verbose") verbose = true;
     else if (a == "--baseline") baseline = true;
+    else if (a == "--annotated-mask") annotated_mask = true;
     else if (a == "--min-found" && i + 1 < argc) chk.min_found = std::atof(argv[++i]);
     else if (a == "--max-line-px" && i + 1 < argc) chk.max_line_px = std::atof(argv[++i]);
     else if (a == "--max-false-per-image" && i + 1 < argc) chk.max_false_per_image = std::atof(argv[++i]);
@@ -706,6 +744,8 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
+                           "       [--annotated-mask]   (in-vivo stills only: the learned detector's line stage fed the annotated\n"
+                           "                             shaft mask at the model's input size, its ceiling)\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
                            "       [--detector colour|learned] [--model MODEL.yaml]   (override the parameters' segmentation/detector, learned_model)\n"
                            "       [--sites OP1,OP2,OP3]   (the in-vivo operations scored; default all three)\n"
@@ -743,6 +783,11 @@ int main(int argc, char** argv) {
                   : "");
   SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
+  if (annotated_mask) {
+    pp.segmentation.detector = SegmentationParams::Detector::kLearned;  // (its parameters; the model gives the input size)
+    if (robotic) std::printf("--annotated-mask: the in-vivo stills only\n");
+    robotic = false;
+  }
   if (baseline && robotic) {
     std::printf("--baseline: the in-vivo stills only (the baseline has no insertion points for the sequences)\n");
     robotic = false;

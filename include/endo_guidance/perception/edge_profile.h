@@ -24,6 +24,18 @@ inline float edgeChannel(float b, float g, float r) { return ColourFeature::chro
 void sampleEdgeChannel(cv::Mat const& bgr, Eigen::Vector2d const& a, Eigen::Vector2d const& d, int count, float* out,
                        bool reference = false);
 
+/// A side's edge channel other than edgeChannel(): the projection of the BGR colour on a unit
+/// direction, the one from the shaft's colour to the tissue's across that side (sideColourDirection()).
+/// Where shaft and tissue are equally chromatic (grey fat, membrane, a black shaft in shadow) the
+/// chroma has no edge, but the colours still differ along this direction. nullptr: edgeChannel().
+using ColourDirection = Eigen::Vector3f;
+/// The unit BGR direction from the shaft's colour to the tissue's beside side `line` (full-res px,
+/// positive side = shaft) over [t0, t1] along it: the difference of the per-channel medians at
+/// `inside_px` in and `outside_px` out, every 2 px; nullopt when fewer than 3 samples lie in the
+/// image or the two colours are the same.
+std::optional<ColourDirection> sideColourDirection(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
+                                                   double inside_px, double outside_px);
+
 /// The edges found on the profiles across `line` at t0 + j step along it (nullopt: no edge on
 /// that profile), with the parameters of widePass().
 struct ProfileEdges {
@@ -33,18 +45,21 @@ struct ProfileEdges {
 };
 /// The sub-pixel API: the edge points of a shaft side on profiles across `line` (full-res px,
 /// positive side = shaft) every refine_step_px for t in [t0, t1] along its direction (-b, a),
-/// each at the steepest descent of edgeChannel() from tissue into the shaft (the centroid of the
-/// slope's lobe), then a robust least-squares line (Tukey biweight) with its covariance.
+/// each at the steepest descent of edgeChannel() (or of the colour along `direction`) from tissue
+/// into the shaft (the centroid of the slope's lobe), then a robust least-squares line (Tukey
+/// biweight) with its covariance.
 std::optional<RefinedLine> refineLineSubpixel(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
-                                              ContourLinesParams const& params);
+                                              ContourLinesParams const& params, ColourDirection const* direction = nullptr);
 /// The parameters of the first, wide sub-pixel pass (coarse_halfwidth_px, profiles sampled at
 /// twice profile_step_px), which recentres a line before the narrow pass.
 ContourLinesParams widePass(ContourLinesParams const& params);
 
 /// refineLineSubpixel() taking the profiles of `reuse` where line and t0 are the same (its step a
-/// multiple of refine_step_px), and keeping every profile's edge in `record`.
+/// multiple of refine_step_px; edgeChannel()'s, so not with a `direction`), and keeping every
+/// profile's edge in `record`.
 std::optional<RefinedLine> refineLineProfiles(cv::Mat const& bgr, geometry::ImageLine const& line, double t0, double t1,
-                                              ContourLinesParams const& params, ProfileEdges const* reuse, ProfileEdges* record);
+                                              ContourLinesParams const& params, ProfileEdges const* reuse, ProfileEdges* record,
+                                              ColourDirection const* direction = nullptr);
 /// A refined line (over [t0, t1] along its direction (-b, a)) followed beyond that extent, within
 /// [t_lo, t_hi]: one narrow profile every refine_step_px, kept while its edge lies on the line
 /// (within max(3 residuals, extend_gate_px)), until extend_max_misses profiles in a row miss;
@@ -52,6 +67,7 @@ std::optional<RefinedLine> refineLineProfiles(cv::Mat const& bgr, geometry::Imag
 /// it. The line refitted over all its points, refitted every 16 new ones on the way. nullopt:
 /// nothing added, or the extension made the residual worse (another edge).
 std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine const& refined, double t0, double t1,
-                                              double t_lo, double t_hi, ContourLinesParams const& params);
+                                              double t_lo, double t_hi, ContourLinesParams const& params,
+                                              ColourDirection const* direction = nullptr);
 
 }  // namespace endo_guidance::perception

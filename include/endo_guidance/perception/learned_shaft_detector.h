@@ -38,6 +38,12 @@ class ShaftNet {
   int shaft_ = 1;
 };
 
+/// The learned detector's stage after its network: the shafts of a shaft-probability map (CV_32F
+/// in [0, 1], the processing scale's size: frame.fov.mask's) as side pairs through the contour fit,
+/// the duplicates removed; `labels` (processing scale) gets each accepted pair's region.
+SegmentationResult shaftsOfProbability(DetectionFrame const& frame, cv::Mat const& probability, SegmentationParams const& params,
+                                       cv::Mat& labels);
+
 /// The learned shaft detector: the network's shaft mask as pairs of straight sides
 /// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the lines on the
 /// frame's edges beside the mask's sides; the network proposes, the frame measures); then the

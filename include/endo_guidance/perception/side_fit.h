@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "endo_guidance/perception/contour_params.h"
@@ -24,6 +25,8 @@ struct SideFit {
   bool merged = false;  ///< the region meets the FOV border more than once (instruments merged)
   bool parallel = false;  ///< a side was not straight from the entry and was found as the stretch parallel to the other
   ContourRejection rejection = ContourRejection::kNone;
+  /// Per side, the colour direction its edge is located along (edge_profile.h); unset: edgeChannel().
+  std::array<std::optional<ColourDirection>, 2> colour_direction;
   /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
   /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
