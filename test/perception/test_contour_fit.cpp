@@ -122,6 +122,43 @@ TEST(ContourLines, SubpixelEdgeIsNotPulledByTheTissueTexture) {
   EXPECT_LT(std::abs(lobe), 0.6 * std::abs(window)) << "lobe " << lobe << " window " << window;  // (measured -0.025)
 }
 
+// A shaft as chromatic as the tissue beside it (a grey shaft on grey fat, darker by 50 levels):
+// the chroma has no edge there, the colour along sideColourDirection() has, found as exactly as
+// in the chroma. The direction points from the shaft's colour to the tissue's.
+TEST(ContourLines, SubpixelEdgeAlongTheSidesColourDirection) {
+  cv::Mat img(100, 100, CV_8UC3);
+  ImageLine const edge = *normalizeLine(Eigen::Vector3d(1.0, -0.1, -40.3));  // positive: shaft side
+  cv::Vec3d const tissue(150, 160, 175), shaft(100, 110, 125);  // chroma 25 both
+  for (int y = 0; y < 100; ++y)
+    for (int x = 0; x < 100; ++x) {
+      double const cov = std::clamp(0.5 + edge.dot(Eigen::Vector3d(x, y, 1.0)), 0.0, 1.0);
+      cv::Vec3d const c = tissue * (1 - cov) + shaft * cov;
+      img.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<uchar>(c[0]), cv::saturate_cast<uchar>(c[1]), cv::saturate_cast<uchar>(c[2]));
+    }
+  ImageLine const start = *normalizeLine(Eigen::Vector3d(1.0, -0.1, -42.0));  // the mask's side, 1.7 px in
+  ContourLinesParams p;
+  ContourLinesParams wide = widePass(p);
+  EXPECT_FALSE(refineLineSubpixel(img, start, 5.0, 95.0, wide));
+  auto const dir = sideColourDirection(img, start, 5.0, 95.0, 4.0, 5.0);
+  ASSERT_TRUE(dir);
+  EXPECT_NEAR((*dir - Eigen::Vector3f(1, 1, 1).normalized()).norm(), 0.0, 1e-6);
+  auto const r0 = refineLineSubpixel(img, start, 5.0, 95.0, wide, &*dir);
+  ASSERT_TRUE(r0);
+  auto const r = refineLineSubpixel(img, r0->line, 5.0, 95.0, p, &*dir);
+  ASSERT_TRUE(r);
+  for (double y : {10.0, 90.0}) {
+    double const x = -(r->line.y() * y + r->line.z()) / r->line.x();
+    EXPECT_NEAR(edge.dot(Eigen::Vector3d(x, y, 1.0)), 0.0, 0.02) << "y " << y;
+  }
+  EXPECT_GT(r->line.head<2>().dot(edge.head<2>()), 0.99);  // (the shaft on its positive side)
+  // The direction reversed (a shaft brighter than the tissue, as taken) has no descent into it.
+  ColourDirection const reversed = -*dir;
+  EXPECT_FALSE(refineLineSubpixel(img, r->line, 5.0, 95.0, p, &reversed));
+  // Uniform colour: no direction.
+  cv::Mat const flat(100, 100, CV_8UC3, cv::Scalar(150, 160, 175));
+  EXPECT_FALSE(sideColourDirection(flat, start, 5.0, 95.0, 4.0, 5.0));
+}
+
 // edgeChannel(): the chroma max - min, exactly.
 TEST(ContourLines, EdgeChannelIsTheChroma) {
   std::mt19937 rng(11);

@@ -162,6 +162,38 @@ TEST(LearnedShaftDetector, TheLinesAreTheFramesEdgesBesideTheMasksSides) {
   EXPECT_NE(none.rejection, ContourRejection::kNone);
 }
 
+// The stage after the network (shaftsOfProbability()) on a grey shaft over greyish fat of the
+// same chroma, brighter by 60 levels: the chroma has no edge beside the mask's sides, the colour
+// direction across each side has; both lines on the true edges.
+TEST(LearnedShaftDetector, ASideAsGreyAsTheTissueIsFoundAlongItsColourDirection) {
+  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(150, 165, 185));  // chroma 35
+  bgr(cv::Rect(0, 200, 400, 40)).setTo(cv::Scalar(90, 105, 125));  // chroma 35
+  cv::Mat half;
+  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  FieldOfView const fov = detectFieldOfView(half);
+  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F);
+  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);  // 3 px too wide each side (full scale)
+  std::vector<Eigen::Vector3d> const no_trocars;
+  DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
+  SegmentationParams const sp;
+  cv::Mat labels;
+  SegmentationResult const r = shaftsOfProbability(frame, prob, sp, labels);
+  ASSERT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
+  for (double y : {199.5, 239.5}) {
+    double best = 1e9;
+    for (auto const& l : r.contours[0].lines)
+      best = std::min(best, std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1)))));
+    EXPECT_LT(best, 0.2) << "edge at y = " << y;
+  }
+  EXPECT_GT(cv::countNonZero(labels), 0);
+  // The same mask over a frame of one colour: nothing, and no line on the mask's own sides.
+  cv::Mat const flat(480, 640, CV_8UC3, cv::Scalar(150, 165, 185));
+  cv::Mat flat_half;
+  cv::resize(flat, flat_half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  DetectionFrame const none{flat, flat_half, fov, frame.fov_area, 2, no_trocars, 1};
+  EXPECT_TRUE(shaftsOfProbability(none, prob, sp, labels).contours.empty());
+}
+
 TEST(LearnedShaftDetector, DetectorSwitchFindsTheRenderedShafts) {
   CleanFrame f;
   for (auto const d : {SegmentationParams::Detector::kColour, SegmentationParams::Detector::kLearned}) {
