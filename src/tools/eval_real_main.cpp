@@ -136,6 +136,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   std::map<std::string, StrictScore> strict;  // per operation
   std::map<std::string, int> strict_images;
   std::map<std::string, int> covered;  // per operation: mask shafts the network covers (learned detector)
+  std::map<std::string, int> line_findable;  // per operation (--annotated-mask): found by a line fitted to each side
   std::vector<fs::path> files;
   for (std::string const& op : sites) {
     fs::path const raw = root / op / "Raw";
@@ -209,6 +210,15 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
         for (auto const& [id, m] : shafts)
           if (cv::countNonZero(m) >= kStrictMinPx) covered[op] += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
       }
+      // The scoring's own ceiling: each side's total least-squares line as the detection's.
+      if (oracle)
+        for (MaskShaft const& s : ms) {
+          if (s.sides[0].empty()) continue;
+          auto const l0 = fitLineLS(s.sides[0]), l1 = fitLineLS(s.sides[1]);
+          if (!l0 || !l1) continue;
+          double const cost = std::max(endo_guidance::tools::sideMedianPx(s.sides[0], *l0), endo_guidance::tools::sideMedianPx(s.sides[1], *l1));
+          line_findable[op] += cost <= kFoundPx.back();
+        }
       ++strict_images[op];
       if (verbose)
         for (std::size_t i = 0; i < ms.size(); ++i)
@@ -375,6 +385,9 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     printStrict(op.c_str(), sc, strict_images[op], "image");
     if (sp.detector == SegmentationParams::Detector::kLearned)
       std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2)\n", op.c_str(), covered[op], sc.shafts);
+    if (oracle)
+      std::printf("  %s: %d of the %d shafts are found by a total least-squares line on each of their sides (the scoring's ceiling)\n",
+                  op.c_str(), line_findable[op], sc.shafts);
     all += sc;
     all_images += strict_images[op];
   }
