@@ -383,7 +383,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   int all_images = 0;
   for (auto const& [op, sc] : strict) {
     printStrict(op.c_str(), sc, strict_images[op], "image");
-    if (sp.detector == SegmentationParams::Detector::kLearned)
+    if (sp.detector == SegmentationParams::Detector::kLearned && !annotated_mask)
       std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2)\n", op.c_str(), covered[op], sc.shafts);
     if (oracle)
       std::printf("  %s: %d of the %d shafts are found by a total least-squares line on each of their sides (the scoring's ceiling)\n",
@@ -781,6 +781,11 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  if (annotated_mask) {
+    detector = "learned";  // (its parameters; the model gives the input size)
+    if (robotic) std::printf("--annotated-mask: the in-vivo stills only\n");
+    robotic = false;
+  }
   try {
     if (!detector.empty()) pp.segmentation.detector = io::detectorFromString(detector);
     if (!model.empty()) pp.segmentation.learned.model = model;
@@ -796,11 +801,6 @@ int main(int argc, char** argv) {
                   : "");
   SegmentationParams const& sp = pp.segmentation;
   bool ok = true;
-  if (annotated_mask) {
-    pp.segmentation.detector = SegmentationParams::Detector::kLearned;  // (its parameters; the model gives the input size)
-    if (robotic) std::printf("--annotated-mask: the in-vivo stills only\n");
-    robotic = false;
-  }
   if (baseline && robotic) {
     std::printf("--baseline: the in-vivo stills only (the baseline has no insertion points for the sequences)\n");
     robotic = false;
