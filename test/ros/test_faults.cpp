@@ -493,7 +493,9 @@ TEST_F(Faults, EachFaultEndsSafeAndRecovers) {
               (stop2 - last_joints) * 1e3, diag_servo2 - t0, again2 - t_resume2);
   std::printf("[ faults ] stops while the joint states were stale: %s\n", watch_->stopsBetween(t0, wall()).c_str());
   EXPECT_LT(stop2 - last_joints, 0.2 + kTick + kSlack);
-  if (!std::isnan(last_command)) EXPECT_LT(last_command - last_joints, 0.2 + kSlack) << "commanded on stale joint states";
+  if (!std::isnan(last_command)) {
+    EXPECT_LT(last_command - last_joints, 0.2 + kSlack) << "commanded on stale joint states";
+  }
   EXPECT_FALSE(std::isnan(diag_servo2));
   EXPECT_LT(again2 - t_resume2, 1.0);
 
