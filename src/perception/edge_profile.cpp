@@ -17,16 +17,21 @@ namespace endo_guidance::perception {
 
 namespace {
 
-// (x, y); false outside.
-bool edgeAt(cv::Mat const& bgr, double x, double y, float* out) {
-  if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
+// The bilinear B, G, R at (x, y), which must lie in [0, cols - 1) x [0, rows - 1).
+inline void bilinearAt(cv::Mat const& bgr, double x, double y, float (&c)[3]) {
   int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
   std::uint8_t const* p0 = bgr.ptr<std::uint8_t>(y0) + 3 * x0;
   std::uint8_t const* p1 = bgr.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
-  float c[3];
   for (int k = 0; k < 3; ++k)
     c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
+}
+
+// edgeChannel() of the bilinear colour at (x, y); false outside.
+bool edgeAt(cv::Mat const& bgr, double x, double y, float* out) {
+  if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;
+  float c[3];
+  bilinearAt(bgr, x, y, c);
   *out = edgeChannel(c[0], c[1], c[2]);
   return true;
 }
@@ -226,15 +231,9 @@ class EdgeProfiler {
   // The colour along direction_ at a + i d, bilinear as edgeAt() (every sample inside the image).
   void sampleProjection(Eigen::Vector2d const& a, Eigen::Vector2d const& d) {
     for (int i = 0; i < ns_; ++i) {
-      double const x = a.x() + i * d.x(), y = a.y() + i * d.y();
-      int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-      float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-      std::uint8_t const* p0 = bgr_.ptr<std::uint8_t>(y0) + 3 * x0;
-      std::uint8_t const* p1 = bgr_.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
-      float v = 0.f;
-      for (int k = 0; k < 3; ++k)
-        v += (*direction_)[k] * ((1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]));
-      prof_[static_cast<std::size_t>(i)] = v;
+      float c[3];
+      bilinearAt(bgr_, a.x() + i * d.x(), a.y() + i * d.y(), c);
+      prof_[static_cast<std::size_t>(i)] = (*direction_)[0] * c[0] + (*direction_)[1] * c[1] + (*direction_)[2] * c[2];
     }
   }
 
