@@ -300,7 +300,7 @@ PipelineParams learnedParams(int threads, int detect_every) {
   return pp;
 }
 
-// The network alone (ShaftNet::shaftProbability()) on the robotic video's frames.
+// The network alone (ShaftNet::probabilities()) on the robotic video's frames.
 void BM_LearnedNetworkPairedWithHSV(benchmark::State& st) {
   auto const& f = roboticFrames(1, 150);
   if (f.images.empty()) {
@@ -308,7 +308,7 @@ void BM_LearnedNetworkPairedWithHSV(benchmark::State& st) {
     return;
   }
   ShaftNet net(defaultShaftModel(), static_cast<int>(st.range(0)));
-  pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(net.shaftProbability(im).data); });
+  pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(net.probabilities(im).shaft.data); });
   cv::setNumThreads(1);
 }
 

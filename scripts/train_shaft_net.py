@@ -245,7 +245,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--sim", default="", help="rendered training frames (endo_guidance_synthetic --write-training DIR)")
     ap.add_argument("--hold-out", default="", help="site left out of training and scored (OP1, OP2, OP3, DS1, DS2)")
-    ap.add_argument("--epochs", type=int, default=80)
+    ap.add_argument("--epochs", type=int, default=240)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--reference", default="", help="a BGR frame: write the network's output on it beside the model")
     ap.add_argument("--weights", default="", help="skip training: export these weights (DIR/shaft_net.pt of a run)")

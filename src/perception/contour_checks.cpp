@@ -32,6 +32,7 @@ char const* toString(ContourRejection r) {
     case ContourRejection::kGlare: return "mostly glare between its lines (near white, achromatic)";
     case ContourRejection::kTipOnBorder: return "its tip is on the field-of-view border (a band across the view, not a shaft entering it)";
     case ContourRejection::kNotContinued: return "found beyond another shaft, but not continued on its other side (not a crossing shaft)";
+    case ContourRejection::kNotShaftAtEntry: return "where it enters, the network sees jaws rather than shaft (a tool's head, not its shaft)";
   }
   return "unknown";
 }

@@ -8,6 +8,8 @@
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <utility>
+#include <vector>
 
 #include "endo_guidance/perception/contour_checks.h"
 #include "endo_guidance/perception/contour_fit.h"
@@ -48,6 +50,8 @@ ShaftNet::ShaftNet(std::string const& yaml_path, int threads) : impl_(std::make_
   auto const it = std::find(classes_.begin(), classes_.end(), "shaft");
   if (it == classes_.end()) fail("'classes' has no 'shaft'");
   shaft_ = static_cast<int>(it - classes_.begin());
+  auto const bg = std::find(classes_.begin(), classes_.end(), "background");
+  background_ = bg == classes_.end() ? -1 : static_cast<int>(bg - classes_.begin());
   if (fs::path(onnx).is_relative()) onnx = (fs::path(path).parent_path() / onnx).string();
   if (!fs::is_regular_file(onnx)) fail("its ONNX file '" + onnx + "' is missing");
   try {
@@ -77,20 +81,22 @@ cv::Mat ShaftNet::logits(cv::Mat const& bgr) {
   return impl_->net.forward();
 }
 
-cv::Mat ShaftNet::shaftProbability(cv::Mat const& bgr) {
+ShaftProbabilities ShaftNet::probabilities(cv::Mat const& bgr) {
   cv::Mat const out = logits(bgr);
   int const n = size_.area(), k = static_cast<int>(classes_.size());
   auto const* l = out.ptr<float>();
-  cv::Mat prob(size_, CV_32F);
-  auto* p = prob.ptr<float>();
-  for (int i = 0; i < n; ++i) {  // softmax over the classes, the shaft's share
+  ShaftProbabilities r{cv::Mat(size_, CV_32F), cv::Mat(size_, CV_32F)};
+  auto* ps = r.shaft.ptr<float>();
+  auto* pi = r.instrument.ptr<float>();
+  for (int i = 0; i < n; ++i) {  // softmax over the classes: the shaft's share, and all but the background's
     float m = l[i];
     for (int c = 1; c < k; ++c) m = std::max(m, l[c * n + i]);
     float s = 0.f;
     for (int c = 0; c < k; ++c) s += std::exp(l[c * n + i] - m);
-    p[i] = std::exp(l[shaft_ * n + i] - m) / s;
+    ps[i] = std::exp(l[shaft_ * n + i] - m) / s;
+    pi[i] = background_ < 0 ? ps[i] : 1.f - std::exp(l[background_ * n + i] - m) / s;
   }
-  return prob;
+  return r;
 }
 
 namespace {
@@ -121,6 +127,37 @@ ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionF
   return f;
 }
 
+// The strip between the pair's sides (the middle 70 %) from the entry half a width on: its box in
+// the processing-scale maps and its mask there (empty box: off the maps).
+std::pair<cv::Rect, cv::Mat> entryStrip(MaskLinePair const& pair, cv::Size size) {
+  Eigen::Vector2d const u = (pair.far - pair.entry).normalized(), v(-u.y(), u.x());
+  double const len = std::min(std::max(0.5 * pair.width, 2.0), (pair.far - pair.entry).norm());
+  double const half = std::max(0.35 * pair.width, 1.0);
+  std::vector<cv::Point> quad;
+  for (auto const& [t, a] : {std::pair{0.0, -half}, {len, -half}, {len, half}, {0.0, half}}) {
+    Eigen::Vector2d const q = pair.entry + t * u + a * v;
+    quad.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
+  }
+  cv::Rect const roi = cv::boundingRect(quad) & cv::Rect(cv::Point(0, 0), size);
+  cv::Mat strip = cv::Mat::zeros(roi.size(), CV_8U);
+  if (roi.empty()) return {roi, strip};
+  for (cv::Point& q : quad) q -= roi.tl();
+  cv::fillConvexPoly(strip, quad, cv::Scalar(255));
+  return {roi, strip};
+}
+
+// A pair of the instrument's mask is a shaft the shaft class alone did not give when, where it
+// enters, the shaft class holds at least half of the instrument's probability (else it is a
+// tool's head) and no accepted shaft's region covers half of it (else it is that shaft again,
+// its lines drawn on toward the head).
+bool newShaftAtEntry(MaskLinePair const& pair, ShaftProbabilities const& p, cv::Mat const& labels) {
+  auto const [roi, strip] = entryStrip(pair, p.shaft.size());
+  if (roi.empty()) return false;
+  double const instrument = cv::mean(p.instrument(roi), strip)[0];
+  if (!(instrument > 0.0) || cv::mean(p.shaft(roi), strip)[0] < 0.5 * instrument) return false;
+  return cv::countNonZero(labels(roi) & strip) * 2 < cv::countNonZero(strip);
+}
+
 // The network for p: `current` when it is still the one p asks for.
 std::shared_ptr<ShaftNet> networkFor(SegmentationParams const& p, SegmentationParams const& old, std::shared_ptr<ShaftNet> current) {
   if (current && p.learned.model == old.learned.model && p.learned.threads == old.learned.threads) return current;
@@ -136,29 +173,37 @@ void LearnedShaftDetector::setParams(SegmentationParams const& p) {
   params_ = p;
 }
 
-SegmentationResult shaftsOfProbability(DetectionFrame const& frame, cv::Mat const& probability, SegmentationParams const& params,
-                                       cv::Mat& labels) {
-  CV_Assert(probability.type() == CV_32F && probability.size() == frame.fov.mask.size());
+SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
+                                       SegmentationParams const& params, cv::Mat& labels) {
+  CV_Assert(probability.shaft.type() == CV_32F && probability.shaft.size() == frame.fov.mask.size() &&
+            probability.instrument.type() == CV_32F && probability.instrument.size() == frame.fov.mask.size());
   SegmentationResult res;
   res.scale = frame.scale;
-  cv::Mat const& p = probability;
-  cv::Mat mask;
-  cv::compare(p, 0.5, mask, cv::CMP_GE);
   labels = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
-  for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours)) {
-    if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
-    auto region = regionOf(pair, mask);
-    if (!region) continue;
-    res.regions.push_back(std::move(*region));
-    ContourFit const f = fitPair(sideFitOf(pair, frame.scale), pair.width * frame.scale, res.regions.back(), frame, params.contours,
-                                 res.contours);
-    res.region_status.push_back(f.rejection);
-    if (!f.contour) continue;
-    res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)
-    res.edges.push_back(f.edges);
-    res.contour_regions.push_back(res.regions.size() - 1);
-    cv::drawContours(labels, std::vector<std::vector<cv::Point>>{res.regions.back().boundary}, 0,
-                     cv::Scalar(static_cast<int>(res.contours.size())), cv::FILLED);
+  // The shaft class's pairs first, then the instrument's that enter as shaft and are new.
+  for (bool const instrument : {false, true}) {
+    cv::Mat const& p = instrument ? probability.instrument : probability.shaft;
+    cv::Mat mask;
+    cv::compare(p, 0.5, mask, cv::CMP_GE);
+    for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours)) {
+      if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
+      auto region = regionOf(pair, mask);
+      if (!region) continue;
+      res.regions.push_back(std::move(*region));
+      if (instrument && !newShaftAtEntry(pair, probability, labels)) {
+        res.region_status.push_back(ContourRejection::kNotShaftAtEntry);
+        continue;
+      }
+      ContourFit const f = fitPair(sideFitOf(pair, frame.scale), pair.width * frame.scale, res.regions.back(), frame,
+                                   params.contours, res.contours);
+      res.region_status.push_back(f.rejection);
+      if (!f.contour) continue;
+      res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)
+      res.edges.push_back(f.edges);
+      res.contour_regions.push_back(res.regions.size() - 1);
+      cv::drawContours(labels, std::vector<std::vector<cv::Point>>{res.regions.back().boundary}, 0,
+                       cv::Scalar(static_cast<int>(res.contours.size())), cv::FILLED);
+    }
   }
   std::vector<std::size_t> none;
   removeDuplicateShafts(res, none);
@@ -166,10 +211,12 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, cv::Mat cons
 }
 
 SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
-  cv::Mat p;  // at the processing scale
-  cv::resize(net_->shaftProbability(frame.bgr), p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  ShaftProbabilities const net = net_->probabilities(frame.bgr);
+  ShaftProbabilities p;  // at the processing scale
+  cv::resize(net.shaft, p.shaft, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  cv::resize(net.instrument, p.instrument, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
   SegmentationResult res = shaftsOfProbability(frame, p, params_, labels_);
-  p.convertTo(feature_, CV_8U, -255.0, 255.0);  // low on shafts, as the colour feature
+  p.shaft.convertTo(feature_, CV_8U, -255.0, 255.0);  // low on shafts, as the colour feature
   return res;
 }
 

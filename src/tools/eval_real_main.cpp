@@ -86,20 +86,19 @@ constexpr int kStrictRoboticMinPx = 500; // robotic: one shaft per connected com
 bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
 bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated shaft mask (in-vivo stills)
 
-// The learned detector's stage after its network (shaftsOfProbability()) fed the annotated shaft
-// mask, reduced to the network's input size and back as the network's output is: what the line
-// stage makes of a perfect mask, the ceiling of any network at that size.
+// The learned detector's stage after its network (shaftsOfProbability()) fed the annotated
+// shaft and instrument (shaft or jaws) masks, reduced to the network's input size and back as the
+// network's output is: what the line stage makes of a perfect mask, the ceiling of any network at
+// that size.
 class AnnotatedMaskDetector final : public ShaftDetector {
  public:
   AnnotatedMaskDetector(SegmentationParams const& p, cv::Size net_size) : params_(p), net_size_(net_size) {}
-  void setMask(cv::Mat const& shaft) { shaft_ = shaft; }  // CV_8U, non-zero on shaft pixels (full resolution)
+  /// The annotated classes (CV_8U, full resolution): 160 shaft, 70 jaws.
+  void setClasses(cv::Mat const& cls) { classes_ = cls; }
   std::unique_ptr<ShaftDetector> clone() const override { return std::make_unique<AnnotatedMaskDetector>(*this); }
   SegmentationResult detect(DetectionFrame const& frame) override {
-    cv::Mat small, p;
-    cv::resize(shaft_, small, net_size_, 0, 0, cv::INTER_AREA);
-    small.convertTo(small, CV_32F, 1.0 / 255.0);
-    cv::resize(small, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
-    p.convertTo(feature_, CV_8U, -255.0, 255.0);
+    ShaftProbabilities p{asNetwork(classes_ == 160, frame), asNetwork((classes_ == 160) | (classes_ == 70), frame)};
+    p.shaft.convertTo(feature_, CV_8U, -255.0, 255.0);
     return shaftsOfProbability(frame, p, params_, labels_);
   }
   bool followable() const override { return true; }
@@ -109,9 +108,16 @@ class AnnotatedMaskDetector final : public ShaftDetector {
   cv::Mat const& labels() const override { return labels_; }
 
  private:
+  cv::Mat asNetwork(cv::Mat const& mask, DetectionFrame const& frame) const {  // at the network's size and back
+    cv::Mat small, p;
+    cv::resize(mask, small, net_size_, 0, 0, cv::INTER_AREA);
+    small.convertTo(small, CV_32F, 1.0 / 255.0);
+    cv::resize(small, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+    return p;
+  }
   SegmentationParams params_;
   cv::Size net_size_;
-  cv::Mat shaft_, feature_, labels_;
+  cv::Mat classes_, feature_, labels_;
 };
 
 struct InvivoChecks {
@@ -163,7 +169,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     }
     ++st.images;
     seg.reset();  // stills: no temporal state
-    if (oracle) oracle->setMask(cls == 160);
+    if (oracle) oracle->setClasses(cls);
     SegmentationResult r = seg.process(im);
     if (baseline) {
       r.contours = detectShaftsHough(im);
@@ -228,6 +234,15 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
             std::printf("  strict miss %s/%s: a shaft of %d px (sides of %zu and %zu px), the nearest detection's larger side median %.1f px\n",
                         op.c_str(), base.c_str(), ms[i].pixels, ms[i].sides[0].size(), ms[i].sides[1].size(), best);
           }
+      if (verbose)  // each false detection, with what the annotation has under its strip
+        for (std::size_t d = 0; d < r.contours.size(); ++d) {
+          if (std::find(sc.match.begin(), sc.match.end(), static_cast<int>(d)) != sc.match.end()) continue;
+          cv::Mat strip = cv::Mat::zeros(im.size(), CV_8U);
+          cv::fillConvexPoly(strip, shaftPolygon(r.contours[d]), 255);
+          int const n = std::max(1, cv::countNonZero(strip));
+          std::printf("  strict false %s/%s: detection %zu, its strip %.0f %% shaft, %.0f %% jaws class\n", op.c_str(), base.c_str(), d,
+                      100.0 * cv::countNonZero(strip & (cls == 160)) / n, 100.0 * cv::countNonZero(strip & jaws) / n);
+        }
     }
     st.shafts += static_cast<int>(ids.size());
     std::map<int, double> found;  // per shaft found: the smallest line median among its detections

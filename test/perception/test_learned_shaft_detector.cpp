@@ -4,6 +4,7 @@
 // edges beside a coarse mask's sides, and the detector switch of the segmentation.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -108,7 +109,8 @@ TEST(LearnedShaftDetector, CommittedModelGivesTheTrainingFrameworksOutput) {
   }
   EXPECT_LT(worst, 1e-3 * std::max(1.0, range)) << "OpenCV's output differs from PyTorch's by " << worst;
   // The probability: in [0, 1], at the input size, high on the rendered shafts.
-  cv::Mat const p = net.shaftProbability(f.image);
+  ShaftProbabilities const probs = net.probabilities(f.image);
+  cv::Mat const& p = probs.shaft;
   ASSERT_EQ(p.size(), net.inputSize());
   double lo, hi;
   cv::minMaxLoc(p, &lo, &hi);
@@ -177,7 +179,7 @@ TEST(LearnedShaftDetector, ASideAsGreyAsTheTissueIsFoundAlongItsColourDirection)
   DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
   SegmentationParams const sp;
   cv::Mat labels;
-  SegmentationResult const r = shaftsOfProbability(frame, prob, sp, labels);
+  SegmentationResult const r = shaftsOfProbability(frame, {prob, prob}, sp, labels);
   ASSERT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
   for (double y : {199.5, 239.5}) {
     double best = 1e9;
@@ -191,7 +193,74 @@ TEST(LearnedShaftDetector, ASideAsGreyAsTheTissueIsFoundAlongItsColourDirection)
   cv::Mat flat_half;
   cv::resize(flat, flat_half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
   DetectionFrame const none{flat, flat_half, fov, frame.fov_area, 2, no_trocars, 1};
-  EXPECT_TRUE(shaftsOfProbability(none, prob, sp, labels).contours.empty());
+  EXPECT_TRUE(shaftsOfProbability(none, {prob, prob}, sp, labels).contours.empty());
+}
+
+// A grey shaft entering from the left on red tissue (640 x 480, edges at y = 199.5 and 239.5,
+// x from 0 to 399) and the stage after the network fed masks of it at the processing scale (half).
+struct StubFrame {
+  cv::Mat bgr = [] {
+    cv::Mat m(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+    m(cv::Rect(0, 200, 400, 40)).setTo(cv::Scalar(128, 128, 128));
+    return m;
+  }();
+  cv::Mat half = [this] {
+    cv::Mat h;
+    cv::resize(bgr, h, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+    return h;
+  }();
+  FieldOfView fov = detectFieldOfView(half);
+  std::vector<Eigen::Vector3d> no_trocars;
+  DetectionFrame frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
+  // A mask over the shaft's strip from x = x0 to x1 (processing px), 3 px too wide each side.
+  static cv::Mat strip(int x0, int x1) {
+    cv::Mat p = cv::Mat::zeros(240, 320, CV_32F);
+    if (x1 > x0) cv::rectangle(p, cv::Rect(x0, 98, x1 - x0, 24), cv::Scalar(1.0), cv::FILLED);
+    return p;
+  }
+  // Whether both true edges are lines of contour c (within 0.2 px at both ends of the shaft).
+  static bool onTheEdges(ApparentContour const& c) {
+    for (double y : {199.5, 239.5}) {
+      double best = 1e9;
+      for (auto const& l : c.lines)
+        best = std::min(best, std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1)))));
+      if (best > 0.2) return false;
+    }
+    return true;
+  }
+};
+
+// The dataset's shaft class is often a stub between the view's border and an insulated sheath of
+// the same width (labelled jaws): too short to pair alone, found with the instrument's mask.
+TEST(LearnedShaftDetector, AShaftStubIsFoundAlongTheInstrumentBeyondIt) {
+  StubFrame const f;
+  SegmentationParams const sp;
+  cv::Mat labels;
+  ShaftProbabilities const stub{StubFrame::strip(0, 14), StubFrame::strip(0, 200)};
+  SegmentationResult const r = shaftsOfProbability(f.frame, stub, sp, labels);
+  ASSERT_EQ(r.contours.size(), 1u);
+  EXPECT_TRUE(StubFrame::onTheEdges(r.contours[0]));
+  EXPECT_NEAR(r.contours[0].tip_px.x(), 399.5, 6.0);
+  // The shaft class alone gives nothing there.
+  EXPECT_TRUE(shaftsOfProbability(f.frame, {stub.shaft, stub.shaft}, sp, labels).contours.empty());
+  // A whole shaft in both masks is one shaft, not two.
+  ShaftProbabilities const whole{StubFrame::strip(0, 200), StubFrame::strip(0, 200)};
+  SegmentationResult const w = shaftsOfProbability(f.frame, whole, sp, labels);
+  ASSERT_EQ(w.contours.size(), 1u);
+  EXPECT_TRUE(StubFrame::onTheEdges(w.contours[0]));
+}
+
+// A tool's head entering the view with no shaft class where it enters (a stapler's head; the
+// shaft class only at its far end) is not a shaft: refused, saying why.
+TEST(LearnedShaftDetector, AnInstrumentWithoutShaftWhereItEntersIsRefused) {
+  StubFrame const f;
+  SegmentationParams const sp;
+  cv::Mat labels;
+  for (cv::Mat const& shaft : {StubFrame::strip(0, 0), StubFrame::strip(170, 200)}) {
+    SegmentationResult const r = shaftsOfProbability(f.frame, {shaft, StubFrame::strip(0, 200)}, sp, labels);
+    EXPECT_TRUE(r.contours.empty());
+    EXPECT_NE(std::find(r.region_status.begin(), r.region_status.end(), ContourRejection::kNotShaftAtEntry), r.region_status.end());
+  }
 }
 
 TEST(LearnedShaftDetector, DetectorSwitchFindsTheRenderedShafts) {

@@ -59,7 +59,7 @@ struct ContourLinesParams {
 enum class ContourRejection {
   kNone = 0, kTooFewPoints, kNotStraight, kNotParallel, kTooShort, kTooThin, kCrossing, kWeakEdges, kResidual,
   kNotElongated, kNotFilled, kAlongBorder, kLowContrast, kWidthJump, kDuplicate, kWidens, kGlare, kTipOnBorder,
-  kNotContinued
+  kNotContinued, kNotShaftAtEntry
 };
 char const* toString(ContourRejection r);
 

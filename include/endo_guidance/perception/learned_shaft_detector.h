@@ -11,6 +11,12 @@
 
 namespace endo_guidance::perception {
 
+/// The network's output as probabilities (CV_32F in [0, 1], all of one size): the shaft class's,
+/// and the instrument's (shaft or jaws: one less the background's).
+struct ShaftProbabilities {
+  cv::Mat shaft, instrument;
+};
+
 /// The per-pixel shaft network, run by OpenCV's DNN module on the CPU (no training framework at
 /// run time). The YAML beside the ONNX file gives the input size, the normalisation
 /// ((BGR - mean) * scale) and the class order (background, shaft, jaws). A missing or unreadable
@@ -24,8 +30,9 @@ class ShaftNet {
   /// Class logits (CV_32F, 1 x classes x height x width) of one BGR frame, resized to the input
   /// (the network's own buffer: valid until the next call).
   cv::Mat logits(cv::Mat const& bgr);
-  /// The shaft class's softmax probability (CV_32F, input size) of one BGR frame.
-  cv::Mat shaftProbability(cv::Mat const& bgr);
+  /// The softmax probabilities of one BGR frame at the input size. A model without a background
+  /// class gives the shaft's as the instrument's.
+  ShaftProbabilities probabilities(cv::Mat const& bgr);
   cv::Size inputSize() const { return size_; }
   std::vector<std::string> const& classes() const { return classes_; }
 
@@ -35,16 +42,20 @@ class ShaftNet {
   cv::Size size_;
   double mean_ = 0.0, scale_ = 1.0;
   std::vector<std::string> classes_;
-  int shaft_ = 1;
+  int shaft_ = 1, background_ = -1;
 };
 
-/// The learned detector's stage after its network: the shafts of a shaft-probability map (CV_32F
-/// in [0, 1], the processing scale's size: frame.fov.mask's) as side pairs through the contour fit,
-/// the duplicates removed; `labels` (processing scale) gets each accepted pair's region.
-SegmentationResult shaftsOfProbability(DetectionFrame const& frame, cv::Mat const& probability, SegmentationParams const& params,
-                                       cv::Mat& labels);
+/// The learned detector's stage after its network, on its probabilities at the processing scale
+/// (frame.fov.mask's size). The instrument's mask (shaft or jaws) proposes the side pairs: the
+/// dataset's shaft class is often only a stub between the view's border and an insulated sheath
+/// of the same width, which together are long enough to pair. Each pair goes through the contour
+/// fit, and is kept only where the shaft class holds the instrument where it enters (the shaft
+/// comes in from the trocar; a tool's head alone, a stapler's, is not its shaft). The duplicates
+/// are removed; `labels` (processing scale) gets each accepted pair's region.
+SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
+                                       SegmentationParams const& params, cv::Mat& labels);
 
-/// The learned shaft detector: the network's shaft mask as pairs of straight sides
+/// The learned shaft detector: the network's instrument mask as pairs of straight sides
 /// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the lines on the
 /// frame's edges beside the mask's sides; the network proposes, the frame measures); then the
 /// glare check and the duplicates' removal, as the colour method's.
