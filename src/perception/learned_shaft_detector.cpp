@@ -146,16 +146,16 @@ std::pair<cv::Rect, cv::Mat> entryStrip(MaskLinePair const& pair, cv::Size size)
   return {roi, strip};
 }
 
-// A pair of the instrument's mask is a shaft the shaft class alone did not give when, where it
-// enters, the shaft class holds at least half of the instrument's probability (else it is a
-// tool's head) and no accepted shaft's region covers half of it (else it is that shaft again,
-// its lines drawn on toward the head).
-bool newShaftAtEntry(MaskLinePair const& pair, ShaftProbabilities const& p, cv::Mat const& labels) {
+// Whether a pair of the instrument's mask is a shaft the shaft class's pairs did not give (kNone):
+// where it enters, the shaft class must hold at least half of the instrument's probability (else
+// it is a tool's head: kNotShaftAtEntry), and no accepted shaft's region may cover half of it
+// (else it is that shaft again, its lines drawn on toward the head: kDuplicate).
+ContourRejection newShaftAtEntry(MaskLinePair const& pair, ShaftProbabilities const& p, cv::Mat const& labels) {
   auto const [roi, strip] = entryStrip(pair, p.shaft.size());
-  if (roi.empty()) return false;
+  if (roi.empty()) return ContourRejection::kNotShaftAtEntry;
   double const instrument = cv::mean(p.instrument(roi), strip)[0];
-  if (!(instrument > 0.0) || cv::mean(p.shaft(roi), strip)[0] < 0.5 * instrument) return false;
-  return cv::countNonZero(labels(roi) & strip) * 2 < cv::countNonZero(strip);
+  if (!(instrument > 0.0) || cv::mean(p.shaft(roi), strip)[0] < 0.5 * instrument) return ContourRejection::kNotShaftAtEntry;
+  return cv::countNonZero(labels(roi) & strip) * 2 < cv::countNonZero(strip) ? ContourRejection::kNone : ContourRejection::kDuplicate;
 }
 
 // The network for p: `current` when it is still the one p asks for.
@@ -182,6 +182,7 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
   labels = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
   // The shaft class's pairs first, then the instrument's that enter as shaft and are new.
   for (bool const instrument : {false, true}) {
+    if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
     cv::Mat const& p = instrument ? probability.instrument : probability.shaft;
     cv::Mat mask;
     cv::compare(p, 0.5, mask, cv::CMP_GE);
@@ -190,8 +191,9 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
       auto region = regionOf(pair, mask);
       if (!region) continue;
       res.regions.push_back(std::move(*region));
-      if (instrument && !newShaftAtEntry(pair, probability, labels)) {
-        res.region_status.push_back(ContourRejection::kNotShaftAtEntry);
+      if (ContourRejection const r = instrument ? newShaftAtEntry(pair, probability, labels) : ContourRejection::kNone;
+          r != ContourRejection::kNone) {
+        res.region_status.push_back(r);
         continue;
       }
       ContourFit const f = fitPair(sideFitOf(pair, frame.scale), pair.width * frame.scale, res.regions.back(), frame,

@@ -46,16 +46,17 @@ class ShaftNet {
 };
 
 /// The learned detector's stage after its network, on its probabilities at the processing scale
-/// (frame.fov.mask's size). The instrument's mask (shaft or jaws) proposes the side pairs: the
-/// dataset's shaft class is often only a stub between the view's border and an insulated sheath
-/// of the same width, which together are long enough to pair. Each pair goes through the contour
-/// fit, and is kept only where the shaft class holds the instrument where it enters (the shaft
-/// comes in from the trocar; a tool's head alone, a stapler's, is not its shaft). The duplicates
-/// are removed; `labels` (processing scale) gets each accepted pair's region.
+/// (frame.fov.mask's size). The shaft class's mask proposes side pairs first, then the
+/// instrument's (shaft or jaws): the dataset's shaft class is often only a stub between the view's
+/// border and an insulated sheath of the same width, which together are long enough to pair. An
+/// instrument pair is kept only where the shaft class holds the instrument where it enters (the
+/// shaft comes in from the trocar; a tool's head alone, a stapler's, is not its shaft) and no
+/// accepted shaft covers that entry. Each pair goes through the contour fit; the duplicates are
+/// removed; `labels` (processing scale) gets each accepted pair's region.
 SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
                                        SegmentationParams const& params, cv::Mat& labels);
 
-/// The learned shaft detector: the network's instrument mask as pairs of straight sides
+/// The learned shaft detector: the network's shaft and instrument masks as pairs of straight sides
 /// (findMaskLinePairs()), each pair through the contour fit (refineContour(): the lines on the
 /// frame's edges beside the mask's sides; the network proposes, the frame measures); then the
 /// glare check and the duplicates' removal, as the colour method's.
