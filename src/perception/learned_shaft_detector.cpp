@@ -180,12 +180,13 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
   SegmentationResult res;
   res.scale = frame.scale;
   labels = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
+  // Every pair's region (its tip and fill) is the instrument's: the tip is the jaws' end.
+  cv::Mat mask;
+  cv::compare(probability.instrument, 0.5, mask, cv::CMP_GE);
   // The shaft class's pairs first, then the instrument's that enter as shaft and are new.
   for (bool const instrument : {false, true}) {
     if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
     cv::Mat const& p = instrument ? probability.instrument : probability.shaft;
-    cv::Mat mask;
-    cv::compare(p, 0.5, mask, cv::CMP_GE);
     for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours)) {
       if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
       auto region = regionOf(pair, mask);

@@ -51,8 +51,9 @@ class ShaftNet {
 /// border and an insulated sheath of the same width, which together are long enough to pair. An
 /// instrument pair is kept only where the shaft class holds the instrument where it enters (the
 /// shaft comes in from the trocar; a tool's head alone, a stapler's, is not its shaft) and no
-/// accepted shaft covers that entry. Each pair goes through the contour fit; the duplicates are
-/// removed; `labels` (processing scale) gets each accepted pair's region.
+/// accepted shaft covers that entry. Each pair goes through the contour fit with its region (tip,
+/// fill) from the instrument's mask, so its tip is the jaws' end; the duplicates are removed;
+/// `labels` (processing scale) gets each accepted pair's region.
 SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
                                        SegmentationParams const& params, cv::Mat& labels);
 
