@@ -84,7 +84,7 @@ constexpr int kSkipped = 77;            // exit status when the data is absent (
 constexpr int kStrictMinPx = 300;        // in-vivo: a mask shaft is an instance with this much class 160
 constexpr int kStrictRoboticMinPx = 500; // robotic: one shaft per connected component of this much
 bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
-bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated shaft mask (in-vivo stills)
+bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated masks (in-vivo stills)
 
 // The learned detector's stage after its network (shaftsOfProbability()) fed the annotated
 // shaft and instrument (shaft or jaws) masks, reduced to the network's input size and back as the
@@ -773,7 +773,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
                            "       [--annotated-mask]   (in-vivo stills only: the learned detector's line stage fed the annotated\n"
-                           "                             shaft mask at the model's input size, its ceiling)\n"
+                           "                             shaft and instrument masks at the model's input size, its ceiling)\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
                            "       [--detector colour|learned] [--model MODEL.yaml]   (override the parameters' segmentation/detector, learned_model)\n"
                            "       [--sites OP1,OP2,OP3]   (the in-vivo operations scored; default all three)\n"

@@ -232,7 +232,7 @@ struct StubFrame {
 
 // The dataset's shaft class is often a stub between the view's border and an insulated sheath of
 // the same width (labelled jaws): too short to pair alone, found with the instrument's mask.
-TEST(LearnedShaftDetector, AShaftStubIsFoundAlongTheInstrumentBeyondIt) {
+TEST(LearnedShaftDetector, AShaftStubIsFoundAlongTheInstrumentBeyondIt) {  // (and the tip is the jaws' end)
   StubFrame const f;
   SegmentationParams const sp;
   cv::Mat labels;
@@ -243,6 +243,12 @@ TEST(LearnedShaftDetector, AShaftStubIsFoundAlongTheInstrumentBeyondIt) {
   EXPECT_NEAR(r.contours[0].tip_px.x(), 399.5, 6.0);
   // The shaft class alone gives nothing there.
   EXPECT_TRUE(shaftsOfProbability(f.frame, {stub.shaft, stub.shaft}, sp, labels).contours.empty());
+  // A shaft class that ends before the jaws: the tip is the instrument's end, the jaws' (the servo's tip).
+  ShaftProbabilities const jaws{StubFrame::strip(0, 150), StubFrame::strip(0, 200)};
+  SegmentationResult const j = shaftsOfProbability(f.frame, jaws, sp, labels);
+  ASSERT_EQ(j.contours.size(), 1u);
+  EXPECT_TRUE(StubFrame::onTheEdges(j.contours[0]));
+  EXPECT_NEAR(j.contours[0].tip_px.x(), 399.5, 6.0);
   // A whole shaft in both masks is one shaft, not two.
   ShaftProbabilities const whole{StubFrame::strip(0, 200), StubFrame::strip(0, 200)};
   SegmentationResult const w = shaftsOfProbability(f.frame, whole, sp, labels);
