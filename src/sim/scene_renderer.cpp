@@ -25,6 +25,8 @@ cv::Mat smoothField(int w, int h, int cells, std::mt19937_64& rng) {
 
 float clamp01(double v) { return static_cast<float>(std::clamp(v, 0.0, 1.0)); }
 
+// The angle (rad) of each jaw to the axis in frame k.
+double jawOpening(SyntheticView const& v, int k) { return 0.15 + 0.1 * std::sin(0.2 * k + v.instrument); }
 }  // namespace
 
 SceneRenderer::SceneRenderer(int width, int height, RenderOptions const& o) : width_(width), height_(height), options_(o) {
@@ -94,6 +96,14 @@ cv::Mat SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv
   return out;
 }
 
+Eigen::Vector2d SceneRenderer::visibleTip(SyntheticView const& v, int k) {
+  if (v.jaw_end_px.allFinite()) return v.jaw_end_px;
+  // Without a 3D jaw length, the jaws are 1.6 shaft widths (at the tip) long.
+  geometry::ApparentContour const& c = v.truth;
+  double const w_tip = c.lines[0].dot(c.tip_px.homogeneous()) + c.lines[1].dot(c.tip_px.homogeneous());
+  return c.tip_px + (c.tip_px - c.entry_px).normalized() * (1.6 * w_tip * std::cos(jawOpening(v, k)));
+}
+
 void SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::Mat& out, cv::Mat& scratch,
                            cv::Mat* labels) const {
   tissue_.copyTo(scratch);
@@ -134,10 +144,9 @@ void SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::M
         if (labels && cov >= 0.5f) labels->at<std::uint8_t>(y, x) = 1;
       }
     }
-    // Jaws: two metal wedges beyond the tip, opening and closing with k; 1.6 widths long, or up
-    // to the projected 3D jaw end when the view has one.
-    double const open = 0.15 + 0.1 * std::sin(0.2 * k + v->instrument);
-    double const jaw = v->jaw_end_px.allFinite() ? (v->jaw_end_px - c.tip_px).norm() / std::cos(open) : 1.6 * w_tip;
+    // Jaws: two metal wedges beyond the tip, opening and closing with k, ending at visibleTip().
+    double const open = jawOpening(*v, k);
+    double const jaw = (visibleTip(*v, k) - c.tip_px).norm() / std::cos(open);
     Eigen::Vector2d const nrm(-dir.y(), dir.x());
     for (int j = -1; j <= 1; j += 2) {
       Eigen::Vector2d const a0 = c.tip_px + nrm * (0.25 * j * w_tip);

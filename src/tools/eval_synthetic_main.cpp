@@ -85,6 +85,7 @@ struct Result {
   int false_reported = 0;  // reported instruments (after attachment) that match no shaft, all frames
   int cut = 0, cut_found = 0;  // shafts with a contour line (nearly) out of view, and those found
   std::vector<double> line_px, dir_deg, dist_rel, trocar_mm, latency_ms;
+  std::vector<double> tip_signed, tip_abs;  // detection frames: the tip along the axis to the jaws' end (px, + beyond)
   std::vector<double> dist_signed, line_signed;  // (estimate - truth) / truth; line offset outward (px) at mid-shaft
   std::vector<double> hsv_ratio;  // --baseline: its cost over one HSV conversion, per frame
   std::vector<std::vector<double>> trocar_after_100;  // per instrument: nearest estimate's error (mm) in each frame from 100 on
@@ -168,6 +169,10 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       }
       ++R.found;
       auto const& c = out.segmentation.contours[best];
+      if (!out.segmentation.tracked) {
+        R.tip_signed.push_back((v.truth.tip_px - v.truth.entry_px).normalized().dot(c.tip_px - SceneRenderer::visibleTip(v, k)));
+        R.tip_abs.push_back(std::abs(R.tip_signed.back()));
+      }
       for (int l = 0; l < 2; ++l) R.line_px.push_back(lineError(c.lines[l], v.truth.lines[l], v.truth.entry_px, v.truth.tip_px));
       for (int l = 0; l < 2; ++l) {
         Eigen::Vector2d const mid = 0.5 * (footOnLine(v.truth.lines[l], v.truth.entry_px) + footOnLine(v.truth.lines[l], v.truth.tip_px));
@@ -412,6 +417,9 @@ int main(int argc, char** argv) {
     if (baseline)
       std::printf("  %s baseline cost: %.1fx cv::cvtColor(BGR->HSV) of the frame (median over frames, same run)\n", s.name.c_str(),
                   percentile(r.hsv_ratio, 0.5));
+    if (!r.tip_abs.empty())
+      std::printf("  %s: tip (the jaws' end) along the axis, %zu detections: p50 %+.2f px (+ beyond), |error| p50 %.2f p95 %.2f px\n",
+                  s.name.c_str(), r.tip_abs.size(), percentile(r.tip_signed, 0.5), percentile(r.tip_abs, 0.5), percentile(r.tip_abs, 0.95));
     if (!r.dir_through.empty())
       std::printf("  %s: through the insertion point (%zu shafts attached to a located one): direction p50 %.3f° p95 %.3f°, distance p50 %.3f %%"
                   " (the same axes alone: %.3f° / %.3f°, %.3f %%)\n",

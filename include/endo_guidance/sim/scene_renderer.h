@@ -46,6 +46,9 @@ class SceneRenderer {
   /// message's buffer), with `scratch` as the float working image: a stream reuses both, so no
   /// frame-sized block is allocated per frame.
   void render(std::vector<SyntheticView> const& views, int k, cv::Mat& out, cv::Mat& scratch, cv::Mat* labels = nullptr) const;
+  /// The visible tip of view v in frame k as render() draws it: where its jaws end, on the image
+  /// axis through the shaft's tip (jaw_end_px when the view has one).
+  static Eigen::Vector2d visibleTip(SyntheticView const& v, int k);
   RenderOptions const& options() const { return options_; }
   /// Coverage of the field of view (CV_32F, 1 inside, 0 outside, vignetting included).
   cv::Mat const& fieldOfView() const { return fov_; }

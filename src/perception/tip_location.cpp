@@ -1,0 +1,138 @@
+// Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
+#include "endo_guidance/perception/tip_location.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include "endo_guidance/perception/image_reduction.h"
+
+namespace endo_guidance::perception {
+
+namespace {
+// Two colours of the samples (rows of B, G, R): k-means from a split at the median brightness
+// (deterministic); one when the samples are few or alike, none when there are none.
+std::vector<cv::Vec3f> twoColours(cv::Mat const& samples) {
+  if (samples.rows < 8) return {};
+  cv::Mat brightness;
+  cv::reduce(samples, brightness, 1, cv::REDUCE_SUM);
+  cv::Mat sorted;
+  cv::sort(brightness, sorted, cv::SORT_EVERY_COLUMN | cv::SORT_ASCENDING);
+  float const mid = sorted.at<float>(sorted.rows / 2);
+  cv::Mat labels(samples.rows, 1, CV_32S), centres;
+  for (int i = 0; i < samples.rows; ++i) labels.at<int>(i) = brightness.at<float>(i) > mid ? 1 : 0;
+  if (cv::countNonZero(labels) < 4 || cv::countNonZero(labels) > samples.rows - 4) {
+    cv::Mat m;
+    cv::reduce(samples, m, 0, cv::REDUCE_AVG);
+    return {cv::Vec3f(m.ptr<float>())};
+  }
+  cv::kmeans(samples, 2, labels, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.5), 1,
+             cv::KMEANS_USE_INITIAL_LABELS, centres);
+  return {cv::Vec3f(centres.ptr<float>(0)), cv::Vec3f(centres.ptr<float>(1))};
+}
+
+// The distance from colour x to the nearest of `colours`.
+float distanceTo(std::vector<cv::Vec3f> const& colours, cv::Vec3f const& x) {
+  float d = std::numeric_limits<float>::infinity();
+  for (cv::Vec3f const& c : colours) d = std::min(d, static_cast<float>(cv::norm(x - c)));
+  return d;
+}
+}  // namespace
+
+std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c, Eigen::Vector2d const& shaft_end,
+                                                cv::Mat const& instrument, cv::Mat const& fov, int scale, double min_contrast) {
+  CV_Assert(bgr.type() == CV_8UC3 && instrument.type() == CV_32F && fov.type() == CV_8U && instrument.size() == fov.size());
+  geometry::ImageLine const ax = geometry::imageAxis(c);
+  Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), end = geometry::footOnLine(ax, shaft_end);
+  if (!((end - e).norm() > 1.0)) return std::nullopt;
+  Eigen::Vector2d const u = (end - e).normalized(), v(-u.y(), u.x());
+  double const width = geometry::shaftWidthAt(c, end);
+  if (!(width >= 2.0)) return std::nullopt;
+  // The window on a 1 px grid: rows across the axis (the strip between the lines and 0.3 width
+  // beyond each, for open jaws), columns along it from a width before the shaft's end to 2.5
+  // widths beyond it.
+  double const back = width;
+  int const cols = static_cast<int>(std::ceil(back + 2.5 * width)) + 1;
+  int const half = static_cast<int>(std::ceil(0.8 * width));
+  int const rows = 2 * half + 1;
+  cv::Mat map(rows, cols, CV_32FC2), pmap(rows, cols, CV_32FC2);
+  for (int r = 0; r < rows; ++r)
+    for (int k = 0; k < cols; ++k) {
+      Eigen::Vector2d const x = end + (k - back) * u + (r - half) * v;
+      Eigen::Vector2d const q = toProcessing(x, scale);
+      map.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(x.x()), static_cast<float>(x.y()));
+      pmap.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(q.x()), static_cast<float>(q.y()));
+    }
+  cv::Mat colour, prob, inside;
+  cv::remap(bgr, colour, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(0));
+  colour.convertTo(colour, CV_32FC3);
+  cv::remap(instrument, prob, pmap, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0.5));
+  cv::remap(fov, inside, pmap, cv::noArray(), cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(0));
+  for (int r = 0; r < rows; ++r)  // (the frame's own bounds: a window past them is out too)
+    for (int k = 0; k < cols; ++k) {
+      cv::Vec2f const x = map.at<cv::Vec2f>(r, k);
+      if (!(x[0] >= 0.f && x[1] >= 0.f && x[0] <= bgr.cols - 1 && x[1] <= bgr.rows - 1)) inside.at<std::uint8_t>(r, k) = 0;
+    }
+  // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
+  // jaws are metal), and the tissue's beside the shaft (beyond its end the mask may miss the jaws).
+  cv::Mat tissue_s(0, 3, CV_32F), instrument_s(0, 3, CV_32F);
+  for (int r = 0; r < rows; ++r)
+    for (int k = 0; k < cols; ++k) {
+      if (!inside.at<std::uint8_t>(r, k)) continue;
+      float const p = prob.at<float>(r, k);
+      if (p >= 0.8f) instrument_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
+      else if (p <= 0.2f && k <= back) tissue_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
+    }
+  std::vector<cv::Vec3f> const tissue = twoColours(tissue_s);
+  std::vector<cv::Vec3f> tool;
+  for (cv::Vec3f const& m : twoColours(instrument_s))  // (one as the tissue's is the tissue between open jaws)
+    if (distanceTo(tissue, m) >= min_contrast) tool.push_back(m);
+  if (tissue.empty() || tool.empty()) return std::nullopt;
+  cv::Vec3f const i0 = tool.front(), i1 = tool.back();
+  float const span = (i1 - i0).dot(i1 - i0);
+  // The instrument's share of each sample: its distance to the tissue's colours over that plus
+  // its distance to the instrument's (the segment between its two: a shaft's end blends into its
+  // jaws). On a blend of tissue and instrument it is the instrument's fraction; its part
+  // connected to the shaft's end (4-neighbours, share over one half) is the instrument.
+  cv::Mat share(rows, cols, CV_32F), reached = cv::Mat::zeros(rows, cols, CV_8U);
+  std::vector<cv::Point> stack;
+  for (int r = 0; r < rows; ++r)
+    for (int k = 0; k < cols; ++k) {
+      cv::Vec3f const& x = colour.at<cv::Vec3f>(r, k);
+      float const lambda = span > 0.f ? std::clamp((x - i0).dot(i1 - i0) / span, 0.f, 1.f) : 0.f;
+      float const dt = distanceTo(tissue, x), di = static_cast<float>(cv::norm(x - (i0 + lambda * (i1 - i0))));
+      float const s = inside.at<std::uint8_t>(r, k) && dt + di > 0.f ? dt / (dt + di) : 0.f;
+      share.at<float>(r, k) = s;
+      if (s > 0.5f && k <= back && std::abs(r - half) <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
+        reached.at<std::uint8_t>(r, k) = 1;
+        stack.emplace_back(k, r);
+      }
+    }
+  if (stack.empty()) return std::nullopt;
+  while (!stack.empty()) {
+    cv::Point const q = stack.back();
+    stack.pop_back();
+    for (cv::Point const n : {q + cv::Point(1, 0), q - cv::Point(1, 0), q + cv::Point(0, 1), q - cv::Point(0, 1)}) {
+      if (n.x < 0 || n.y < 0 || n.x >= cols || n.y >= rows || reached.at<std::uint8_t>(n) || !(share.at<float>(n) > 0.5f)) continue;
+      reached.at<std::uint8_t>(n) = 1;
+      stack.push_back(n);
+    }
+  }
+  // The farthest reach, sub-pixel: where the share crosses one half beyond the last sample reached.
+  double best = -1.0;
+  int best_row = half;
+  for (int r = 0; r < rows; ++r)
+    for (int k = cols - 1; k >= 0; --k) {
+      if (!reached.at<std::uint8_t>(r, k)) continue;
+      if (k == cols - 1) return std::nullopt;  // runs on past the jaws' reach
+      float const a = share.at<float>(r, k), b = share.at<float>(r, k + 1);
+      double const t = k + (a - 0.5) / std::max(1e-6, static_cast<double>(a - b));
+      if (t > best) best = t, best_row = r;
+      break;
+    }
+  return end + (best - back) * u + (best_row - half) * v;
+}
+
+}  // namespace endo_guidance::perception
