@@ -219,6 +219,36 @@ def iou(model, items):
     return inter / max(1, union)
 
 
+def load_onnx(model, path):
+    """The weights of an exported model (export(): batch norm folded into each convolution) into
+    `model`: each convolution takes its folded weight, its batch norm passes the folded bias on."""
+    import onnx
+    from onnx import numpy_helper
+    m = onnx.load(path)
+    init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
+    convs = [n for n in m.graph.node if n.op_type == "Conv"]
+    mods = [(name, mod) for name, mod in model.named_modules() if isinstance(mod, nn.Conv2d)]
+    if len(convs) != len(mods):
+        sys.exit("train_shaft_net.py: %s has %d convolutions, the network %d" % (path, len(convs), len(mods)))
+    bns = {name: mod for name, mod in model.named_modules() if isinstance(mod, nn.BatchNorm2d)}
+    with torch.no_grad():
+        for node, (name, conv) in zip(convs, mods):
+            w = torch.from_numpy(init[node.input[1]].copy())
+            b = torch.from_numpy(init[node.input[2]].copy()) if len(node.input) > 2 else torch.zeros(w.shape[0])
+            if w.shape != conv.weight.shape:
+                sys.exit("train_shaft_net.py: %s does not match the network at %s" % (path, name))
+            conv.weight.copy_(w)
+            if conv.bias is not None:
+                conv.bias.copy_(b)
+                continue
+            parent, idx = name.rsplit(".", 1)  # the batch norm right after it in its Sequential
+            bn = bns[parent + "." + str(int(idx) + 1)]
+            bn.running_mean.zero_()
+            bn.running_var.fill_(1.0)
+            bn.weight.fill_(float(np.sqrt(1.0 + bn.eps)))
+            bn.bias.copy_(b)
+
+
 def export(model, path):
     import onnx
     model.eval()
@@ -249,6 +279,8 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--reference", default="", help="a BGR frame: write the network's output on it beside the model")
     ap.add_argument("--weights", default="", help="skip training: export these weights (DIR/shaft_net.pt of a run)")
+    ap.add_argument("--onnx", default="", help="skip training: the weights of this exported model (with --reference: "
+                    "its reference output again, after a change of the rendered frame)")
     args = ap.parse_args()
 
     torch.manual_seed(args.seed)
@@ -271,6 +303,9 @@ def main():
     model = ShaftNet()
     if args.weights:
         model.load_state_dict(torch.load(args.weights))
+        args.epochs = 0
+    elif args.onnx:
+        load_onnx(model, args.onnx)
         args.epochs = 0
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=1e-4)
     per_epoch, batch = 256, 16

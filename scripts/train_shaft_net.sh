@@ -9,6 +9,8 @@
 #                                         endo_guidance_eval_real; the table -> build/training/loso/table.md
 #   scripts/train_shaft_net.sh --check    retrains the shipped model into build/training/check and
 #                                         compares its figures with the committed model's
+#   scripts/train_shaft_net.sh --reference  the committed model's reference output again, on the
+#                                         frame the renderer draws now (after a change to it)
 # Fixed seeds; the training time on this machine is printed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -80,5 +82,12 @@ PY
     done
     echo "(the two 'all' lines should agree within 3 points of found and 0.05 false per image)"
     ;;
-  *) echo "usage: scripts/train_shaft_net.sh [--loso|--check]" >&2; exit 2 ;;
+  --reference)
+    rm -rf "$OUT/reference" "$OUT/reference_model"
+    "$BIN/endo_guidance_synthetic" --write-sequence "$OUT/reference" --frames 1 >/dev/null
+    $PY scripts/train_shaft_net.py --data "$DATA" --out "$OUT/reference_model" --onnx models/shaft_net.onnx \
+      --reference "$OUT/reference/frames/000000.png"
+    cp "$OUT/reference_model/shaft_net_reference.yml.gz" models/
+    ;;
+  *) echo "usage: scripts/train_shaft_net.sh [--loso|--check|--reference]" >&2; exit 2 ;;
 esac

@@ -2,6 +2,7 @@
 #include "endo_guidance/sim/scene_renderer.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -24,6 +25,36 @@ cv::Mat smoothField(int w, int h, int cells, std::mt19937_64& rng) {
 }
 
 float clamp01(double v) { return static_cast<float>(std::clamp(v, 0.0, 1.0)); }
+
+// Paints the convex quad q (px) in colour col over img with each pixel's coverage (the product of
+// the box-filtered coverages of its four half-planes, as the shaft's silhouette), and label 2
+// (jaws) where that is at least one half.
+void fillQuad(cv::Mat& img, cv::Mat* labels, std::array<Eigen::Vector2d, 4> const& q, cv::Vec3f const& col) {
+  Eigen::Vector2d const centre = 0.25 * (q[0] + q[1] + q[2] + q[3]);
+  std::array<Eigen::Vector3d, 4> edge;  // normalised lines, positive inside
+  for (int i = 0; i < 4; ++i) {
+    Eigen::Vector2d const a = q[i], b = q[(i + 1) % 4];
+    Eigen::Vector3d l(a.y() - b.y(), b.x() - a.x(), a.x() * b.y() - a.y() * b.x());
+    double const n = l.head<2>().norm();
+    if (!(n > 1e-9)) return;
+    l /= n;
+    edge[i] = l.dot(centre.homogeneous()) < 0.0 ? Eigen::Vector3d(-l) : l;
+  }
+  double x0 = q[0].x(), x1 = x0, y0 = q[0].y(), y1 = y0;
+  for (auto const& p : q) x0 = std::min(x0, p.x()), x1 = std::max(x1, p.x()), y0 = std::min(y0, p.y()), y1 = std::max(y1, p.y());
+  int const c0 = std::max(0, static_cast<int>(std::floor(x0)) - 1), c1 = std::min(img.cols - 1, static_cast<int>(std::ceil(x1)) + 1);
+  int const r0 = std::max(0, static_cast<int>(std::floor(y0)) - 1), r1 = std::min(img.rows - 1, static_cast<int>(std::ceil(y1)) + 1);
+  for (int y = r0; y <= r1; ++y)
+    for (int x = c0; x <= c1; ++x) {
+      Eigen::Vector3d const p(x, y, 1.0);
+      float cov = 1.f;
+      for (auto const& l : edge) cov *= clamp01(0.5 + l.dot(p));
+      if (cov <= 0.f) continue;
+      cv::Vec3f& dst = img.at<cv::Vec3f>(y, x);
+      dst = dst * (1.f - cov) + col * cov;
+      if (labels && cov >= 0.5f) labels->at<std::uint8_t>(y, x) = 2;
+    }
+}
 
 // The angle (rad) of each jaw to the axis in frame k.
 double jawOpening(SyntheticView const& v, int k) { return 0.15 + 0.1 * std::sin(0.2 * k + v.instrument); }
@@ -154,12 +185,7 @@ void SceneRenderer::render(std::vector<SyntheticView> const& views, int k, cv::M
       Eigen::Vector2d const a1 = a0 + jd * jaw + nrm * (0.12 * j * w_tip);
       Eigen::Vector2d const a2 = a0 + jd * jaw - nrm * (0.12 * j * w_tip);
       Eigen::Vector2d const a3 = a0 - nrm * (0.25 * j * w_tip);
-      // Sub-pixel vertices (4 fractional bits): truncated integer corners biased the visible tip.
-      std::vector<cv::Point> poly;
-      for (auto const& q : {a0, a1, a2, a3})
-        poly.emplace_back(static_cast<int>(std::lround(q.x() * 16.0)), static_cast<int>(std::lround(q.y() * 16.0)));
-      cv::fillConvexPoly(img, poly, cv::Scalar(175, 175, 180), cv::LINE_AA, 4);
-      if (labels) cv::fillConvexPoly(*labels, poly, cv::Scalar(2), cv::LINE_8, 4);
+      fillQuad(img, labels, {a0, a1, a2, a3}, cv::Vec3f(175.f, 175.f, 180.f));
     }
   }
   // Field of view, noise, 8-bit.
