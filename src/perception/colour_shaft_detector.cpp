@@ -545,6 +545,7 @@ SegmentationResult ColourShaftDetector::detect(DetectionFrame const& frame) {
   }
   // (a shaft found whole after a strip inside it was: the strip's seed came first)
   removeDuplicateShafts(F.res, F.contour_memory);
+  locateTips(F.res, frame);
   labels_ = grower_.labels();
   F.carryMemory();
   memory_ = std::move(F.memory_now);

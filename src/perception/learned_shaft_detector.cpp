@@ -13,9 +13,7 @@
 
 #include "endo_guidance/perception/contour_checks.h"
 #include "endo_guidance/perception/contour_fit.h"
-#include "endo_guidance/perception/image_reduction.h"
 #include "endo_guidance/perception/mask_line_pairs.h"
-#include "endo_guidance/perception/tip_location.h"
 
 namespace endo_guidance::perception {
 
@@ -203,11 +201,7 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
                                    params.contours, res.contours);
       res.region_status.push_back(f.rejection);
       if (!f.contour) continue;
-      geometry::ApparentContour c = *f.contour;
-      if (auto const tip = locateTipOnFrame(frame.bgr, c, toFullRes(pair.far, frame.scale), probability.instrument,
-                                                                                     frame.fov.mask, frame.scale))
-        c.tip_px = *tip;
-      res.contours.push_back(onImageAxis(c));  // (reported on the image axis, as the colour method's)
+      res.contours.push_back(onImageAxis(*f.contour));  // (reported on the image axis, as the colour method's)
       res.edges.push_back(f.edges);
       res.contour_regions.push_back(res.regions.size() - 1);
       cv::drawContours(labels, std::vector<std::vector<cv::Point>>{res.regions.back().boundary}, 0,
@@ -216,6 +210,7 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
   }
   std::vector<std::size_t> none;
   removeDuplicateShafts(res, none);
+  locateTips(res, frame, &probability.instrument);
   return res;
 }
 

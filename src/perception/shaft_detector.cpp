@@ -7,6 +7,8 @@
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 
+#include "endo_guidance/perception/tip_location.h"
+
 namespace endo_guidance::perception {
 
 bool duplicatesAShaft(geometry::ApparentContour const& c, std::vector<geometry::ApparentContour> const& found) {
@@ -91,6 +93,23 @@ void removeDuplicateShafts(SegmentationResult& res, std::vector<std::size_t>& ke
   // better (a wedge between a shaft's edge and a tissue edge).
   drop(narrowerDuplicates(res.contours));
   drop(overlappingDuplicates(res.contours));
+}
+
+void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat const* instrument) {
+  cv::Mat inside;
+  for (std::size_t i = 0; i < res.contours.size() && i < res.contour_regions.size() && i < res.edges.size(); ++i) {
+    if (!instrument) {
+      inside.create(frame.fov.mask.size(), CV_32F);
+      inside.setTo(0.0);
+      cv::drawContours(inside, std::vector<std::vector<cv::Point>>{res.regions[res.contour_regions[i]].boundary}, 0, cv::Scalar(1.0),
+                       cv::FILLED);
+    }
+    if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], instrument ? *instrument : inside, frame.fov.mask,
+                                          frame.scale)) {
+      res.contours[i].tip_px = *tip;
+      res.contours[i] = onImageAxis(res.contours[i]);
+    }
+  }
 }
 
 geometry::ApparentContour onImageAxis(geometry::ApparentContour c) {

@@ -2,6 +2,7 @@
 #include "endo_guidance/perception/tip_location.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -41,13 +42,23 @@ float distanceTo(std::vector<cv::Vec3f> const& colours, cv::Vec3f const& x) {
 }
 }  // namespace
 
-std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c, Eigen::Vector2d const& shaft_end,
-                                                cv::Mat const& instrument, cv::Mat const& fov, int scale, double min_contrast) {
+std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, cv::Mat const& instrument,
+                                                cv::Mat const& fov, int scale, double min_contrast) {
   CV_Assert(bgr.type() == CV_8UC3 && instrument.type() == CV_32F && fov.type() == CV_8U && instrument.size() == fov.size());
   geometry::ImageLine const ax = geometry::imageAxis(c);
-  Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), end = geometry::footOnLine(ax, shaft_end);
-  if (!((end - e).norm() > 1.0)) return std::nullopt;
-  Eigen::Vector2d const u = (end - e).normalized(), v(-u.y(), u.x());
+  Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), to_tip = geometry::footOnLine(ax, c.tip_px) - e;
+  if (!(to_tip.norm() > 1.0) || edges[0].empty() || edges[1].empty()) return std::nullopt;
+  Eigen::Vector2d const u = to_tip.normalized(), v(-u.y(), u.x());
+  // The shaft's end: where the shorter of its two lines' edge points ends.
+  double t_end = std::numeric_limits<double>::infinity();
+  for (auto const& side : edges) {
+    double t = -std::numeric_limits<double>::infinity();
+    for (auto const& q : side) t = std::max(t, u.dot(q - e));
+    t_end = std::min(t_end, t);
+  }
+  if (!(t_end > 1.0)) return std::nullopt;
+  Eigen::Vector2d const end = e + t_end * u;
   double const width = geometry::shaftWidthAt(c, end);
   if (!(width >= 2.0)) return std::nullopt;
   // The window on a 1 px grid: rows across the axis (the strip between the lines and 0.3 width
@@ -76,14 +87,15 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
       if (!(x[0] >= 0.f && x[1] >= 0.f && x[0] <= bgr.cols - 1 && x[1] <= bgr.rows - 1)) inside.at<std::uint8_t>(r, k) = 0;
     }
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
-  // jaws are metal), and the tissue's beside the shaft (beyond its end the mask may miss the jaws).
+  // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
+  // between the lines where closed jaws continue them, the mask may miss the jaws).
   cv::Mat tissue_s(0, 3, CV_32F), instrument_s(0, 3, CV_32F);
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k < cols; ++k) {
       if (!inside.at<std::uint8_t>(r, k)) continue;
       float const p = prob.at<float>(r, k);
       if (p >= 0.8f) instrument_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
-      else if (p <= 0.2f && k <= back) tissue_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
+      else if (p <= 0.2f && k <= back && std::abs(r - half) > 0.5 * width) tissue_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
     }
   std::vector<cv::Vec3f> const tissue = twoColours(tissue_s);
   std::vector<cv::Vec3f> tool;

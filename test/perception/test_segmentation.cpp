@@ -3,6 +3,7 @@
 // README comes from endo_guidance_eval_synthetic; these bounds guard against regressions).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <tuple>
 #include <opencv2/imgproc.hpp>
@@ -46,10 +47,18 @@ struct HardScene {
 struct Stats {
   int visible = 0, found = 0, false_shafts = 0;
   std::vector<double> err;
+  std::vector<double> tip_err;  // |tip - the jaws' end| along the axis (px)
+  double tipP50() const {
+    std::vector<double> t = tip_err;
+    std::sort(t.begin(), t.end());
+    return t.empty() ? 1e9 : t[t.size() / 2];
+  }
 };
 
-Stats run(RenderOptions const& ro, int frames) {
-  SyntheticScene scene(defaultInstruments());
+Stats run(RenderOptions const& ro, int frames, std::size_t instruments = 3) {
+  std::vector<SyntheticInstrument> motions = defaultInstruments();
+  motions.resize(std::min(instruments, motions.size()));
+  SyntheticScene scene(motions);
   SceneRenderer renderer(640, 480, ro);
   InstrumentSegmenter seg;
   Stats s;
@@ -70,6 +79,7 @@ Stats run(RenderOptions const& ro, int frames) {
           continue;
         used[j] = true;
         ++s.found;
+        s.tip_err.push_back(std::abs((v.truth.tip_px - v.truth.entry_px).normalized().dot(c.tip_px - SceneRenderer::visibleTip(v, k))));
         for (int l = 0; l < 2; ++l) {
           Eigen::Vector2d const q = v.truth.tip_px;
           Eigen::Vector2d const f = q - v.truth.lines[l].head<2>() * v.truth.lines[l].dot(Eigen::Vector3d(q.x(), q.y(), 1));
@@ -158,6 +168,21 @@ TEST(Segmentation, BlackShaftsInACircularView) {
   Stats const s = run(ro, 60);
   std::printf("[ black, circular, 60 frames ] found %d/%d, false %d\n", s.found, s.visible, s.false_shafts);
   EXPECT_GT(s.found, 0.6 * s.visible);
+}
+
+// The tip is the jaws' end located on the frame, not the region's end (at half resolution, a few
+// px short of thin jaws): one instrument, grey on tissue and black with metal jaws in a circular view.
+TEST(Segmentation, TheTipIsTheJawsEndOnTheFrame) {
+  RenderOptions black;
+  black.black_shafts = true;
+  black.circular_fov = true;
+  for (RenderOptions const& ro : {RenderOptions{}, black}) {
+    Stats const s = run(ro, 60, 1);
+    std::printf("[ one instrument%s, 60 frames ] found %d/%d, tip (the jaws' end) along the axis p50 %.2f px\n",
+                ro.black_shafts ? ", black" : "", s.found, s.visible, s.tipP50());
+    EXPECT_GT(s.found, 0.9 * s.visible);
+    EXPECT_LT(s.tipP50(), 0.75);
+  }
 }
 
 TEST(Segmentation, RejectsBadInput) {
@@ -319,8 +344,10 @@ TEST(Segmentation, AShaftMergedWithGauzeOnBothSidesIsFoundFromItsOwnEntry) {
 // beside the gauze blob, which lies on the border; the border's tissue level there is the
 // gauze's, low, so the seed's growth levels were all lowered below the metal's level and the
 // shaft was never grown whole. The absolute levels above the lowered ones are tried after them:
-// the left shaft is found, its lines within 1 px of the truth over the part it reports (from its
-// entry to its tip; the lower line leaves the image 90 px before the true entry).
+// the left shaft is found, its lines within 1.5 px of the truth over the part of each in the view
+// (from the entry it reports, or where the line enters the view, to the shaft's end; the lower
+// line leaves the image 90 px before the entry; beside the gauze, under noise and JPEG, it is
+// 1.0 px off where it does).
 TEST(Segmentation, AShaftBesideAGreyBlobOnTheBorderIsGrownAtTheAbsoluteLevels) {
   HardScene hard;
   SyntheticScene& scene = hard.scene;
@@ -333,10 +360,13 @@ TEST(Segmentation, AShaftBesideAGreyBlobOnTheBorderIsGrownAtTheAbsoluteLevels) {
     bool found = false;
     for (auto const& c : res.contours) {
       double e = 0.0;
-      for (int l = 0; l < 2; ++l)
-        for (Eigen::Vector2d const& q : {c.entry_px, c.tip_px})
-          e = std::max(e, std::abs(c.lines[l].dot(footOnLine(truth.lines[l], q).homogeneous())));
-      found |= e < 1.0;
+      for (int l = 0; l < 2; ++l) {
+        Eigen::Vector2d const end = footOnLine(truth.lines[l], truth.tip_px), d = (end - footOnLine(truth.lines[l], c.entry_px)).normalized();
+        Eigen::Vector2d start = footOnLine(truth.lines[l], c.entry_px);  // moved along the line into the view
+        for (int i = 0; i < 4000 && (start.x() < 0.0 || start.y() < 0.0 || start.x() > 639.0 || start.y() > 479.0); ++i) start += 0.25 * d;
+        for (Eigen::Vector2d const& q : {start, end}) e = std::max(e, std::abs(c.lines[l].dot(q.homogeneous())));
+      }
+      found |= e < 1.5;
     }
     EXPECT_TRUE(found) << "frame " << k;
   }
@@ -635,27 +665,21 @@ TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
 }
 
 // The hard rendered scene through the pipeline, frames 200-283: in frame 283 the left
-// instrument's jaws touch the right shaft's lower side. The right shaft's region seen again from
-// its entry (the region refused for another seed) has its lower side re-sought, and one
-// candidate takes the touching jaws' edge: its lines 53 px off the truth, 1.85x wider at the
-// tip than at the entry. A re-sought pair may widen at most resought_max_widening (1.5): the
-// right shaft is found with both lines within 1 px of the truth; not with the bound at 10.
-TEST(Segmentation, AReSoughtSideOnATouchingInstrumentIsRefusedAsWidening) {
+// instrument's jaws touch the right shaft's lower side. The right shaft is found with both lines
+// within 1 px of the truth. (With the jaws drawn with fillConvexPoly, its region seen again had a
+// re-sought candidate on the touching jaws' edge, 1.85x wider at the tip, which only
+// resought_max_widening refused; with their exact coverage no frame of the clean or hard scene,
+// 0-600, gives one: that bound is not exercised by a rendered frame now.)
+TEST(Segmentation, TheHardScenesShaftIsFoundWhereAnotherInstrumentsJawsTouchIt) {
   HardScene hard;
-  auto error = [&](double max_widening) {
-    PipelineParams pp;
-    pp.segmentation.resought_max_widening = max_widening;
-    double best = 1e9;
-    hard.throughPipeline(pp, 200, 283, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
-      if (k < 283) return;
-      ApparentContour const& truth = views[1].truth;  // the right shaft
-      EXPECT_GT(truth.entry_px.x(), 630.0);
-      for (auto const& c : out.segmentation.contours) best = std::min(best, lineErrorOverItsExtent(c, truth));
-    });
-    return best;
-  };
-  EXPECT_LT(error(1.5), 1.0);
-  EXPECT_GT(error(10.0), 1.0);
+  double best = 1e9;
+  hard.throughPipeline(PipelineParams{}, 200, 283, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
+    if (k < 283) return;
+    ApparentContour const& truth = views[1].truth;  // the right shaft
+    EXPECT_GT(truth.entry_px.x(), 630.0);
+    for (auto const& c : out.segmentation.contours) best = std::min(best, lineErrorOverItsExtent(c, truth));
+  });
+  EXPECT_LT(best, 1.0);
 }
 
 

@@ -52,9 +52,9 @@ class ShaftNet {
 /// instrument pair is kept only where the shaft class holds the instrument where it enters (the
 /// shaft comes in from the trocar; a tool's head alone, a stapler's, is not its shaft) and no
 /// accepted shaft covers that entry. Each pair goes through the contour fit with its region (tip,
-/// fill) from the instrument's mask, so its tip is the jaws' end, then located on the frame
-/// (locateTipOnFrame()); the duplicates are removed; `labels` (processing scale) gets each
-/// accepted pair's region.
+/// fill) from the instrument's mask, so its tip is the jaws' end; the duplicates are removed and
+/// each tip located on the frame (locateTips()); `labels` (processing scale) gets each accepted
+/// pair's region.
 SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
                                        SegmentationParams const& params, cv::Mat& labels);
 

@@ -112,6 +112,12 @@ std::vector<std::size_t> overlappingDuplicates(std::vector<geometry::ApparentCon
 /// per-contour data, dropped alike.
 void removeDuplicateShafts(SegmentationResult& res, std::vector<std::size_t>& keys);
 
+/// Each contour's tip located on the frame (locateTipOnFrame()), on its image axis: the last step
+/// of both detectors, after the duplicates' removal. The coarse mask is `instrument` (a network's
+/// probability at the processing scale, surer than its thresholded region) or else each
+/// contour's region.
+void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat const* instrument = nullptr);
+
 /// The contour as reported: entry and tip moved onto its image axis (the lines' bisector), where
 /// a seed or a mask's far point lies off it (an oblique entry, a jaw's corner).
 geometry::ApparentContour onImageAxis(geometry::ApparentContour c);

@@ -2,28 +2,32 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <opencv2/core.hpp>
 #include <optional>
+#include <vector>
 
 #include "endo_guidance/geometry/apparent_contour.h"
 
 namespace endo_guidance::perception {
 
-/// The tip (the jaws' end) of a fitted contour located on the full-resolution frame, for a coarse
-/// instrument mask: a network's mask is a few of its own pixels short of thin jaws, and joins the
-/// jaws of two instruments that nearly touch; the frame does neither. About the shaft's end, two
-/// colours of the instrument (a black shaft's jaws are metal) and two of the tissue beside the
-/// shaft are taken where the mask is sure of them (k-means; a trimap, as in matting). A pixel's
-/// instrument share is its distance to the tissue's colours over that plus its distance to the
-/// instrument's; the tip is the farthest point along the image axis where the share, connected
-/// to the shaft's end, crosses one half (sub-pixel), within 2.5 widths beyond that end (the jaws'
-/// reach, as the contour fit's). nullopt, and the mask's tip stands, when no instrument colour
-/// differs from the tissue's by `min_contrast` levels or the instrument runs on past that reach.
+/// The tip (the jaws' end) of a fitted contour located on the full-resolution frame, from a
+/// coarse mask of the instrument (a network's at 160 x 128, or a region grown at half resolution):
+/// such a mask stops a few of its own pixels short of thin jaws, and joins the jaws of two
+/// instruments that nearly touch; the frame does neither. About the shaft's end, two colours of
+/// the instrument (a black shaft's jaws are metal) and two of the tissue beside the shaft are
+/// taken where the mask is sure of them (k-means; a trimap, as in matting). A pixel's instrument
+/// share is its distance to the tissue's colours over that plus its distance to the instrument's;
+/// the tip is the farthest point along the image axis where the share, connected to the shaft's
+/// end, crosses one half (sub-pixel), within 2.5 widths beyond that end (the jaws' reach, as the
+/// contour fit's). nullopt, and the mask's tip stands, when no instrument colour differs from
+/// the tissue's by `min_contrast` levels or the instrument runs on past that reach.
 ///
-/// `shaft_end`: where the mask's straight sides end (full-resolution px); `instrument`: the mask's
-/// probability (CV_32F) at the processing scale, `fov`: the field of view's mask there, `scale`:
-/// processing to full resolution.
-std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c, Eigen::Vector2d const& shaft_end,
-                                                cv::Mat const& instrument, cv::Mat const& fov, int scale, double min_contrast = 20.0);
+/// `edges`: the contour's edge points per line (ContourFit::edges: the shaft's end is where the
+/// shorter line ends); `instrument`: the mask (CV_32F, 1 inside, or a probability) at the
+/// processing scale, `fov`: the field of view's mask there, `scale`: processing to full resolution.
+std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, cv::Mat const& instrument,
+                                                cv::Mat const& fov, int scale, double min_contrast = 20.0);
 
 }  // namespace endo_guidance::perception
