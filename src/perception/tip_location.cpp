@@ -13,10 +13,15 @@
 namespace endo_guidance::perception {
 
 namespace {
-// Two colours of the samples (rows of B, G, R): k-means from a split at the median brightness
-// (deterministic); one when the samples are few or alike, none when there are none.
-std::vector<cv::Vec3f> twoColours(cv::Mat const& samples) {
-  if (samples.rows < 8) return {};
+// Two colours of the samples: k-means from a split at the median brightness (deterministic), on
+// at most about 300 of them (a wide shaft's window has thousands); one when they are alike, none
+// when they are fewer than 8.
+std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
+  if (all.size() < 8) return {};
+  std::vector<cv::Vec3f> colours;
+  std::size_t const step = all.size() / 300 + 1;
+  for (std::size_t i = 0; i < all.size(); i += step) colours.push_back(all[i]);
+  cv::Mat const samples(static_cast<int>(colours.size()), 3, CV_32F, colours.data());
   cv::Mat brightness;
   cv::reduce(samples, brightness, 1, cv::REDUCE_SUM);
   cv::Mat sorted;
@@ -37,8 +42,8 @@ std::vector<cv::Vec3f> twoColours(cv::Mat const& samples) {
 // The distance from colour x to the nearest of `colours`.
 float distanceTo(std::vector<cv::Vec3f> const& colours, cv::Vec3f const& x) {
   float d = std::numeric_limits<float>::infinity();
-  for (cv::Vec3f const& c : colours) d = std::min(d, static_cast<float>(cv::norm(x - c)));
-  return d;
+  for (cv::Vec3f const& c : colours) d = std::min(d, (x - c).dot(x - c));
+  return std::sqrt(d);
 }
 }  // namespace
 
@@ -61,17 +66,18 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   Eigen::Vector2d const end = e + t_end * u;
   double const width = geometry::shaftWidthAt(c, end);
   if (!(width >= 2.0)) return std::nullopt;
-  // The window on a 1 px grid: rows across the axis (the strip between the lines and 0.3 width
-  // beyond each, for open jaws), columns along it from a width before the shaft's end to 2.5
-  // widths beyond it.
-  double const back = width;
-  int const cols = static_cast<int>(std::ceil(back + 2.5 * width)) + 1;
-  int const half = static_cast<int>(std::ceil(0.8 * width));
+  // The window: columns along the axis from a width before the shaft's end to 2.5 widths beyond
+  // it; rows across it (the strip between the lines and 0.3 width beyond each, for open jaws).
+  // Every px on a thin shaft; a wide one, near the lens, at 48 columns and 24 rows per width.
+  double const dc = std::max(1.0, width / 48.0), dr = std::max(1.0, width / 24.0);
+  double const back = width / dc;  // (in columns)
+  int const cols = static_cast<int>(std::ceil(3.5 * width / dc)) + 1;
+  int const half = static_cast<int>(std::ceil(0.8 * width / dr));
   int const rows = 2 * half + 1;
   cv::Mat map(rows, cols, CV_32FC2), pmap(rows, cols, CV_32FC2);
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k < cols; ++k) {
-      Eigen::Vector2d const x = end + (k - back) * u + (r - half) * v;
+      Eigen::Vector2d const x = end + (k - back) * dc * u + (r - half) * dr * v;
       Eigen::Vector2d const q = toProcessing(x, scale);
       map.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(x.x()), static_cast<float>(x.y()));
       pmap.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(q.x()), static_cast<float>(q.y()));
@@ -89,13 +95,13 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
   // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
   // between the lines where closed jaws continue them, the mask may miss the jaws).
-  cv::Mat tissue_s(0, 3, CV_32F), instrument_s(0, 3, CV_32F);
+  std::vector<cv::Vec3f> tissue_s, instrument_s;
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k < cols; ++k) {
       if (!inside.at<std::uint8_t>(r, k)) continue;
       float const p = prob.at<float>(r, k);
-      if (p >= 0.8f) instrument_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
-      else if (p <= 0.2f && k <= back && std::abs(r - half) > 0.5 * width) tissue_s.push_back(cv::Mat(1, 3, CV_32F, colour.ptr<float>(r, k)));
+      if (p >= 0.8f) instrument_s.push_back(colour.at<cv::Vec3f>(r, k));
+      else if (p <= 0.2f && k <= back && std::abs(r - half) * dr > 0.5 * width) tissue_s.push_back(colour.at<cv::Vec3f>(r, k));
     }
   std::vector<cv::Vec3f> const tissue = twoColours(tissue_s);
   std::vector<cv::Vec3f> tool;
@@ -114,10 +120,10 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
     for (int k = 0; k < cols; ++k) {
       cv::Vec3f const& x = colour.at<cv::Vec3f>(r, k);
       float const lambda = span > 0.f ? std::clamp((x - i0).dot(i1 - i0) / span, 0.f, 1.f) : 0.f;
-      float const dt = distanceTo(tissue, x), di = static_cast<float>(cv::norm(x - (i0 + lambda * (i1 - i0))));
+      float const dt = distanceTo(tissue, x), di = std::sqrt((x - i0 - lambda * (i1 - i0)).dot(x - i0 - lambda * (i1 - i0)));
       float const s = inside.at<std::uint8_t>(r, k) && dt + di > 0.f ? dt / (dt + di) : 0.f;
       share.at<float>(r, k) = s;
-      if (s > 0.5f && k <= back && std::abs(r - half) <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
+      if (s > 0.5f && k <= back && std::abs(r - half) * dr <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
         reached.at<std::uint8_t>(r, k) = 1;
         stack.emplace_back(k, r);
       }
@@ -144,7 +150,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
       if (t > best) best = t, best_row = r;
       break;
     }
-  return end + (best - back) * u + (best_row - half) * v;
+  return end + (best - back) * dc * u + (best_row - half) * dr * v;
 }
 
 }  // namespace endo_guidance::perception
