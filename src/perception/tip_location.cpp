@@ -14,12 +14,12 @@ namespace endo_guidance::perception {
 
 namespace {
 // Two colours of the samples: k-means from a split at the median brightness (deterministic), on
-// at most about 300 of them (a wide shaft's window has thousands); one when they are alike, none
+// at most about 150 of them (a wide shaft's window has thousands); one when they are alike, none
 // when they are fewer than 8.
 std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
   if (all.size() < 8) return {};
   std::vector<cv::Vec3f> colours;
-  std::size_t const step = all.size() / 300 + 1;
+  std::size_t const step = all.size() / 150 + 1;
   for (std::size_t i = 0; i < all.size(); i += step) colours.push_back(all[i]);
   cv::Mat const samples(static_cast<int>(colours.size()), 3, CV_32F, colours.data());
   cv::Mat brightness;
@@ -37,6 +37,18 @@ std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
   cv::kmeans(samples, 2, labels, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.5), 1,
              cv::KMEANS_USE_INITIAL_LABELS, centres);
   return {cv::Vec3f(centres.ptr<float>(0)), cv::Vec3f(centres.ptr<float>(1))};
+}
+
+// The bilinear B, G, R of the frame at (x, y), which lies in [0, cols - 1) x [0, rows - 1).
+cv::Vec3f bilinearColour(cv::Mat const& bgr, double x, double y) {
+  int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  cv::Vec3b const* a = bgr.ptr<cv::Vec3b>(y0) + x0;
+  cv::Vec3b const* b = bgr.ptr<cv::Vec3b>(y0 + 1) + x0;
+  cv::Vec3f c;
+  for (int ch = 0; ch < 3; ++ch)
+    c[ch] = (1.f - fy) * ((1.f - fx) * a[0][ch] + fx * a[1][ch]) + fy * ((1.f - fx) * b[0][ch] + fx * b[1][ch]);
+  return c;
 }
 
 // The distance from colour x to the nearest of `colours`.
@@ -74,23 +86,28 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   int const cols = static_cast<int>(std::ceil(3.5 * width / dc)) + 1;
   int const half = static_cast<int>(std::ceil(0.8 * width / dr));
   int const rows = 2 * half + 1;
-  cv::Mat map(rows, cols, CV_32FC2), pmap(rows, cols, CV_32FC2);
+  // Each sample: the frame's colour (bilinear), the mask (bilinear, processing scale) and whether
+  // it lies in the field of view and the frame (a window past them is out).
+  cv::Mat colour(rows, cols, CV_32FC3), prob(rows, cols, CV_32F), inside(rows, cols, CV_8U);
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k < cols; ++k) {
       Eigen::Vector2d const x = end + (k - back) * dc * u + (r - half) * dr * v;
       Eigen::Vector2d const q = toProcessing(x, scale);
-      map.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(x.x()), static_cast<float>(x.y()));
-      pmap.at<cv::Vec2f>(r, k) = cv::Vec2f(static_cast<float>(q.x()), static_cast<float>(q.y()));
-    }
-  cv::Mat colour, prob, inside;
-  cv::remap(bgr, colour, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(0));
-  colour.convertTo(colour, CV_32FC3);
-  cv::remap(instrument, prob, pmap, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0.5));
-  cv::remap(fov, inside, pmap, cv::noArray(), cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(0));
-  for (int r = 0; r < rows; ++r)  // (the frame's own bounds: a window past them is out too)
-    for (int k = 0; k < cols; ++k) {
-      cv::Vec2f const x = map.at<cv::Vec2f>(r, k);
-      if (!(x[0] >= 0.f && x[1] >= 0.f && x[0] <= bgr.cols - 1 && x[1] <= bgr.rows - 1)) inside.at<std::uint8_t>(r, k) = 0;
+      int const qx = static_cast<int>(std::floor(q.x())), qy = static_cast<int>(std::floor(q.y()));
+      bool const in = x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 &&
+                      qx < fov.cols - 1 && qy < fov.rows - 1 && fov.at<std::uint8_t>(static_cast<int>(std::lround(q.y())),
+                                                                                   static_cast<int>(std::lround(q.x()))) != 0;
+      inside.at<std::uint8_t>(r, k) = in;
+      if (!in) {
+        colour.at<cv::Vec3f>(r, k) = cv::Vec3f(0.f, 0.f, 0.f);
+        prob.at<float>(r, k) = 0.5f;
+        continue;
+      }
+      colour.at<cv::Vec3f>(r, k) = bilinearColour(bgr, x.x(), x.y());
+      float const fx = static_cast<float>(q.x() - qx), fy = static_cast<float>(q.y() - qy);
+      float const* p0 = instrument.ptr<float>(qy) + qx;
+      float const* p1 = instrument.ptr<float>(qy + 1) + qx;
+      prob.at<float>(r, k) = (1.f - fy) * ((1.f - fx) * p0[0] + fx * p0[1]) + fy * ((1.f - fx) * p1[0] + fx * p1[1]);
     }
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
   // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
