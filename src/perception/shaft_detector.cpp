@@ -96,13 +96,15 @@ void removeDuplicateShafts(SegmentationResult& res, std::vector<std::size_t>& ke
 }
 
 void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat const* instrument) {
-  cv::Mat inside;
+  cv::Mat inside;  // (each region drawn alone, and cleared over its box after)
+  if (!instrument) inside = cv::Mat::zeros(frame.fov.mask.size(), CV_32F);
+  cv::Rect drawn;
   for (std::size_t i = 0; i < res.contours.size() && i < res.contour_regions.size() && i < res.edges.size(); ++i) {
     if (!instrument) {
-      inside.create(frame.fov.mask.size(), CV_32F);
-      inside.setTo(0.0);
-      cv::drawContours(inside, std::vector<std::vector<cv::Point>>{res.regions[res.contour_regions[i]].boundary}, 0, cv::Scalar(1.0),
-                       cv::FILLED);
+      Region const& region = res.regions[res.contour_regions[i]];
+      inside(drawn).setTo(0.0);
+      cv::drawContours(inside, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(1.0), cv::FILLED);
+      drawn = cv::boundingRect(region.boundary) & cv::Rect(cv::Point(0, 0), inside.size());
     }
     if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], instrument ? *instrument : inside, frame.fov.mask,
                                           frame.scale)) {

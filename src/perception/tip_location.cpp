@@ -13,30 +13,32 @@
 namespace endo_guidance::perception {
 
 namespace {
-// Two colours of the samples: k-means from a split at the median brightness (deterministic), on
-// at most about 150 of them (a wide shaft's window has thousands); one when they are alike, none
-// when they are fewer than 8.
+// Two colours of the samples (a black shaft and its metal jaws; tissue in and out of shade), on
+// at most about 256 of them: the means of the darker and the brighter, split half-way between
+// the 5th and 95th brightness percentiles, then half-way between the two means (two steps of
+// k-means in brightness, so a few metal samples among many black ones keep their own colour).
+// One when the two are alike, none when the samples are fewer than 8.
 std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
   if (all.size() < 8) return {};
-  std::vector<cv::Vec3f> colours;
-  std::size_t const step = all.size() / 150 + 1;
-  for (std::size_t i = 0; i < all.size(); i += step) colours.push_back(all[i]);
-  cv::Mat const samples(static_cast<int>(colours.size()), 3, CV_32F, colours.data());
-  cv::Mat brightness;
-  cv::reduce(samples, brightness, 1, cv::REDUCE_SUM);
-  cv::Mat sorted;
-  cv::sort(brightness, sorted, cv::SORT_EVERY_COLUMN | cv::SORT_ASCENDING);
-  float const mid = sorted.at<float>(sorted.rows / 2);
-  cv::Mat labels(samples.rows, 1, CV_32S), centres;
-  for (int i = 0; i < samples.rows; ++i) labels.at<int>(i) = brightness.at<float>(i) > mid ? 1 : 0;
-  if (cv::countNonZero(labels) < 4 || cv::countNonZero(labels) > samples.rows - 4) {
-    cv::Mat m;
-    cv::reduce(samples, m, 0, cv::REDUCE_AVG);
-    return {cv::Vec3f(m.ptr<float>())};
+  std::size_t const step = all.size() / 256 + 1;
+  std::vector<cv::Vec3f> c;
+  std::vector<float> b;
+  for (std::size_t i = 0; i < all.size(); i += step) c.push_back(all[i]), b.push_back(all[i][0] + all[i][1] + all[i][2]);
+  std::vector<float> sorted = b;
+  std::sort(sorted.begin(), sorted.end());
+  float split = 0.5f * (sorted[sorted.size() / 20] + sorted[sorted.size() - 1 - sorted.size() / 20]);
+  cv::Vec3f lo, hi;
+  for (int pass = 0; pass < 2; ++pass) {
+    lo = hi = cv::Vec3f(0.f, 0.f, 0.f);
+    int n_lo = 0, n_hi = 0;
+    for (std::size_t i = 0; i < c.size(); ++i) b[i] <= split ? (lo += c[i], ++n_lo) : (hi += c[i], ++n_hi);
+    if (n_lo == 0 || n_hi == 0) return {(lo + hi) / static_cast<float>(c.size())};
+    lo /= static_cast<float>(n_lo);
+    hi /= static_cast<float>(n_hi);
+    split = 0.5f * (lo[0] + lo[1] + lo[2] + hi[0] + hi[1] + hi[2]);
   }
-  cv::kmeans(samples, 2, labels, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.5), 1,
-             cv::KMEANS_USE_INITIAL_LABELS, centres);
-  return {cv::Vec3f(centres.ptr<float>(0)), cv::Vec3f(centres.ptr<float>(1))};
+  if ((hi - lo).dot(hi - lo) < 1.f) return {0.5f * (lo + hi)};
+  return {lo, hi};
 }
 
 // The bilinear B, G, R of the frame at (x, y), which lies in [0, cols - 1) x [0, rows - 1).
@@ -80,35 +82,33 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   if (!(width >= 2.0)) return std::nullopt;
   // The window: columns along the axis from a width before the shaft's end to 2.5 widths beyond
   // it; rows across it (the strip between the lines and 0.3 width beyond each, for open jaws).
-  // Every px on a thin shaft; a wide one, near the lens, at 48 columns and 24 rows per width.
-  double const dc = std::max(1.0, width / 48.0), dr = std::max(1.0, width / 24.0);
+  // 16 columns and 12 rows per width (every px on a thin shaft); the end is then sought every
+  // quarter px along the rows that reach farthest.
+  double const dc = std::max(1.0, width / 16.0), dr = std::max(1.0, width / 12.0);
   double const back = width / dc;  // (in columns)
   int const cols = static_cast<int>(std::ceil(3.5 * width / dc)) + 1;
   int const half = static_cast<int>(std::ceil(0.8 * width / dr));
   int const rows = 2 * half + 1;
-  // Each sample: the frame's colour (bilinear), the mask (bilinear, processing scale) and whether
-  // it lies in the field of view and the frame (a window past them is out).
-  cv::Mat colour(rows, cols, CV_32FC3), prob(rows, cols, CV_32F), inside(rows, cols, CV_8U);
+  // A sample at x (full resolution): whether it lies in the field of view and the frame (a window
+  // past them is out), the frame's colour (bilinear) and the mask (bilinear, processing scale).
+  auto sample = [&](Eigen::Vector2d const& x, cv::Vec3f& colour_x, float& prob_x) {
+    Eigen::Vector2d const q = toProcessing(x, scale);
+    int const qx = static_cast<int>(std::floor(q.x())), qy = static_cast<int>(std::floor(q.y()));
+    if (!(x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 && qx < fov.cols - 1 &&
+          qy < fov.rows - 1 && fov.at<std::uint8_t>(static_cast<int>(std::lround(q.y())), static_cast<int>(std::lround(q.x()))) != 0))
+      return false;
+    colour_x = bilinearColour(bgr, x.x(), x.y());
+    float const fx = static_cast<float>(q.x() - qx), fy = static_cast<float>(q.y() - qy);
+    float const* p0 = instrument.ptr<float>(qy) + qx;
+    float const* p1 = instrument.ptr<float>(qy + 1) + qx;
+    prob_x = (1.f - fy) * ((1.f - fx) * p0[0] + fx * p0[1]) + fy * ((1.f - fx) * p1[0] + fx * p1[1]);
+    return true;
+  };
+  auto at = [&](double t, double a) { return Eigen::Vector2d(end + t * u + a * v); };  // t, a in px from the shaft's end
+  cv::Mat colour(rows, cols, CV_32FC3, cv::Scalar::all(0)), prob(rows, cols, CV_32F, cv::Scalar(0.5)), inside(rows, cols, CV_8U);
   for (int r = 0; r < rows; ++r)
-    for (int k = 0; k < cols; ++k) {
-      Eigen::Vector2d const x = end + (k - back) * dc * u + (r - half) * dr * v;
-      Eigen::Vector2d const q = toProcessing(x, scale);
-      int const qx = static_cast<int>(std::floor(q.x())), qy = static_cast<int>(std::floor(q.y()));
-      bool const in = x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 &&
-                      qx < fov.cols - 1 && qy < fov.rows - 1 && fov.at<std::uint8_t>(static_cast<int>(std::lround(q.y())),
-                                                                                   static_cast<int>(std::lround(q.x()))) != 0;
-      inside.at<std::uint8_t>(r, k) = in;
-      if (!in) {
-        colour.at<cv::Vec3f>(r, k) = cv::Vec3f(0.f, 0.f, 0.f);
-        prob.at<float>(r, k) = 0.5f;
-        continue;
-      }
-      colour.at<cv::Vec3f>(r, k) = bilinearColour(bgr, x.x(), x.y());
-      float const fx = static_cast<float>(q.x() - qx), fy = static_cast<float>(q.y() - qy);
-      float const* p0 = instrument.ptr<float>(qy) + qx;
-      float const* p1 = instrument.ptr<float>(qy + 1) + qx;
-      prob.at<float>(r, k) = (1.f - fy) * ((1.f - fx) * p0[0] + fx * p0[1]) + fy * ((1.f - fx) * p1[0] + fx * p1[1]);
-    }
+    for (int k = 0; k < cols; ++k)
+      inside.at<std::uint8_t>(r, k) = sample(at((k - back) * dc, (r - half) * dr), colour.at<cv::Vec3f>(r, k), prob.at<float>(r, k));
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
   // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
   // between the lines where closed jaws continue them, the mask may miss the jaws).
@@ -131,14 +131,17 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   // its distance to the instrument's (the segment between its two: a shaft's end blends into its
   // jaws). On a blend of tissue and instrument it is the instrument's fraction; its part
   // connected to the shaft's end (4-neighbours, share over one half) is the instrument.
+  auto shareOf = [&](cv::Vec3f const& x) {
+    float const lambda = span > 0.f ? std::clamp((x - i0).dot(i1 - i0) / span, 0.f, 1.f) : 0.f;
+    cv::Vec3f const off = x - i0 - lambda * (i1 - i0);
+    float const dt = distanceTo(tissue, x), di = std::sqrt(off.dot(off));
+    return dt + di > 0.f ? dt / (dt + di) : 0.f;
+  };
   cv::Mat share(rows, cols, CV_32F), reached = cv::Mat::zeros(rows, cols, CV_8U);
   std::vector<cv::Point> stack;
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k < cols; ++k) {
-      cv::Vec3f const& x = colour.at<cv::Vec3f>(r, k);
-      float const lambda = span > 0.f ? std::clamp((x - i0).dot(i1 - i0) / span, 0.f, 1.f) : 0.f;
-      float const dt = distanceTo(tissue, x), di = std::sqrt((x - i0 - lambda * (i1 - i0)).dot(x - i0 - lambda * (i1 - i0)));
-      float const s = inside.at<std::uint8_t>(r, k) && dt + di > 0.f ? dt / (dt + di) : 0.f;
+      float const s = inside.at<std::uint8_t>(r, k) ? shareOf(colour.at<cv::Vec3f>(r, k)) : 0.f;
       share.at<float>(r, k) = s;
       if (s > 0.5f && k <= back && std::abs(r - half) * dr <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
         reached.at<std::uint8_t>(r, k) = 1;
@@ -155,19 +158,38 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
       stack.push_back(n);
     }
   }
-  // The farthest reach, sub-pixel: where the share crosses one half beyond the last sample reached.
-  double best = -1.0;
+  // The farthest reach: the rows whose last sample reached is farthest, each sought every quarter
+  // px from there to the next column for where the share crosses one half (linear between samples).
+  int k_far = -1;
+  std::vector<int> last(rows, -1);
+  for (int r = 0; r < rows; ++r) {
+    for (int k = cols - 1; k >= 0 && last[r] < 0; --k)
+      if (reached.at<std::uint8_t>(r, k)) last[r] = k;
+    k_far = std::max(k_far, last[r]);
+  }
+  if (k_far == cols - 1) return std::nullopt;  // runs on past the jaws' reach
+  double best = -1e300;
   int best_row = half;
-  for (int r = 0; r < rows; ++r)
-    for (int k = cols - 1; k >= 0; --k) {
-      if (!reached.at<std::uint8_t>(r, k)) continue;
-      if (k == cols - 1) return std::nullopt;  // runs on past the jaws' reach
-      float const a = share.at<float>(r, k), b = share.at<float>(r, k + 1);
-      double const t = k + (a - 0.5) / std::max(1e-6, static_cast<double>(a - b));
-      if (t > best) best = t, best_row = r;
-      break;
+  int const steps = std::max(1, static_cast<int>(std::ceil(4.0 * dc)));
+  for (int r = 0; r < rows; ++r) {
+    if (last[r] != k_far) continue;
+    double const t0 = (k_far - back) * dc, a = (r - half) * dr;
+    float prev = share.at<float>(r, k_far);
+    double t = t0 + dc;  // (the next column's sample, if no finer one crosses before it)
+    for (int i = 1; i <= steps; ++i) {
+      double const ti = t0 + dc * i / steps;
+      cv::Vec3f col;
+      float p = 0.f;
+      float const si = i == steps ? share.at<float>(r, k_far + 1) : sample(at(ti, a), col, p) ? shareOf(col) : 0.f;
+      if (si <= 0.5f) {
+        t = ti - (dc / steps) * (0.5f - si) / std::max(1e-6f, prev - si);
+        break;
+      }
+      prev = si;
     }
-  return end + (best - back) * dc * u + (best_row - half) * dr * v;
+    if (t > best) best = t, best_row = r;
+  }
+  return at(best, (best_row - half) * dr);
 }
 
 }  // namespace endo_guidance::perception
