@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgproc.hpp>
+#include <utility>
 
 #include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/learned_shaft_detector.h"
@@ -197,13 +198,18 @@ TEST(LearnedShaftDetector, ASideAsGreyAsTheTissueIsFoundAlongItsColourDirection)
 }
 
 // A grey shaft entering from the left on red tissue (640 x 480, edges at y = 199.5 and 239.5,
-// x from 0 to 399) and the stage after the network fed masks of it at the processing scale (half).
+// x from 0 to 399), or another 640 x 480 frame, and the stage after the network fed masks of it at
+// the processing scale (half).
 struct StubFrame {
-  cv::Mat bgr = [] {
+  static cv::Mat greyShaft() {
     cv::Mat m(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
     m(cv::Rect(0, 200, 400, 40)).setTo(cv::Scalar(128, 128, 128));
     return m;
-  }();
+  }
+  explicit StubFrame(cv::Mat image = greyShaft()) : bgr(std::move(image)) {}
+  // (after a change to bgr: its half again, in place, so that `frame` still refers to both)
+  void reduce() { cv::resize(bgr, half, half.size(), 0, 0, cv::INTER_AREA); }
+  cv::Mat bgr;
   cv::Mat half = [this] {
     cv::Mat h;
     cv::resize(bgr, h, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
@@ -272,48 +278,37 @@ TEST(LearnedShaftDetector, AnInstrumentWithoutShaftWhereItEntersIsRefused) {
 // A black shaft with metal jaws on red tissue (640 x 480): the shaft x 0-359, rows 200-239; the
 // upper jaw to x = 399 (its end, the tip, at 399.5), the lower to 389. The coarse mask (processing
 // scale, half) ends 10 px into the jaws, 30 px short of the tip, as a network's at 160 x 128 does.
-struct JawsFrame {
-  cv::Mat bgr = [] {
-    cv::Mat m(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
-    m(cv::Rect(0, 200, 360, 40)).setTo(cv::Scalar(40, 40, 40));
-    m(cv::Rect(360, 200, 40, 13)).setTo(cv::Scalar(175, 175, 180));
-    m(cv::Rect(360, 227, 30, 13)).setTo(cv::Scalar(175, 175, 180));
-    return m;
-  }();
-  cv::Mat half = [this] {
-    cv::Mat h;
-    cv::resize(bgr, h, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
-    return h;
-  }();
-  FieldOfView fov = detectFieldOfView(half);
-  std::vector<Eigen::Vector3d> no_trocars;
-  DetectionFrame frame() const { return {bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1}; }
-  static cv::Mat coarseMask() { return StubFrame::strip(0, 185); }
-};
+cv::Mat blackShaftWithJaws() {
+  cv::Mat m(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+  m(cv::Rect(0, 200, 360, 40)).setTo(cv::Scalar(40, 40, 40));
+  m(cv::Rect(360, 200, 40, 13)).setTo(cv::Scalar(175, 175, 180));
+  m(cv::Rect(360, 227, 30, 13)).setTo(cv::Scalar(175, 175, 180));
+  return m;
+}
 
 // The tip is located on the frame: the jaws' end, not the coarse mask's (the servo's tip).
 TEST(LearnedShaftDetector, TheTipIsTheJawsEndOnTheFrame) {
-  JawsFrame f;
+  StubFrame f(blackShaftWithJaws());
   SegmentationParams const sp;
   cv::Mat labels;
-  cv::Mat const mask = JawsFrame::coarseMask();
-  SegmentationResult const r = shaftsOfProbability(f.frame(), {mask, mask}, sp, labels);
+  cv::Mat const mask = StubFrame::strip(0, 185);
+  SegmentationResult const r = shaftsOfProbability(f.frame, {mask, mask}, sp, labels);
   ASSERT_EQ(r.contours.size(), 1u);
   EXPECT_NEAR(r.contours[0].tip_px.x(), 399.5, 0.5);  // (the mask's own end: 370)
   EXPECT_NEAR(r.contours[0].tip_px.y(), 219.5, 0.5);  // on the image axis
   // Another tool's jaw 2 px beyond, joined to these jaws in the coarse mask: the frame parts them.
   f.bgr(cv::Rect(402, 190, 60, 20)).setTo(cv::Scalar(175, 175, 180));
-  cv::resize(f.bgr, f.half, f.half.size(), 0, 0, cv::INTER_AREA);
+  f.reduce();
   cv::Mat joined = mask.clone();
   cv::rectangle(joined, cv::Rect(185, 94, 47, 20), cv::Scalar(1.0), cv::FILLED);
-  SegmentationResult const j = shaftsOfProbability(f.frame(), {mask, joined}, sp, labels);
+  SegmentationResult const j = shaftsOfProbability(f.frame, {mask, joined}, sp, labels);
   ASSERT_EQ(j.contours.size(), 1u);
   EXPECT_NEAR(j.contours[0].tip_px.x(), 399.5, 0.5);
   // The shaft's colour running on past the jaws' reach (2.5 widths): no end seen, the mask's tip stands.
   f.bgr(cv::Rect(360, 190, 240, 50)).setTo(cv::Scalar(60, 80, 200));
   f.bgr(cv::Rect(360, 200, 240, 40)).setTo(cv::Scalar(40, 40, 40));
-  cv::resize(f.bgr, f.half, f.half.size(), 0, 0, cv::INTER_AREA);
-  SegmentationResult const n = shaftsOfProbability(f.frame(), {mask, mask}, sp, labels);
+  f.reduce();
+  SegmentationResult const n = shaftsOfProbability(f.frame, {mask, mask}, sp, labels);
   ASSERT_EQ(n.contours.size(), 1u);
   EXPECT_NEAR(n.contours[0].tip_px.x(), 369.5, 2.5);
 }
