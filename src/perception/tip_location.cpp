@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
-#include <opencv2/imgproc.hpp>
 #include <vector>
 
 #include "endo_guidance/perception/image_reduction.h"
