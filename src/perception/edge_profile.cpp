@@ -17,16 +17,6 @@ namespace endo_guidance::perception {
 
 namespace {
 
-// The bilinear B, G, R at (x, y), which must lie in [0, cols - 1) x [0, rows - 1).
-inline void bilinearAt(cv::Mat const& bgr, double x, double y, float (&c)[3]) {
-  int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  std::uint8_t const* p0 = bgr.ptr<std::uint8_t>(y0) + 3 * x0;
-  std::uint8_t const* p1 = bgr.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
-  for (int k = 0; k < 3; ++k)
-    c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
-}
-
 // edgeChannel() of the bilinear colour at (x, y); false outside.
 bool edgeAt(cv::Mat const& bgr, double x, double y, float* out) {
   if (x < 0.0 || y < 0.0 || x >= bgr.cols - 1 || y >= bgr.rows - 1) return false;

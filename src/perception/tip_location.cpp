@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #include <vector>
 
+#include "endo_guidance/perception/edge_profile.h"
 #include "endo_guidance/perception/image_reduction.h"
 
 namespace endo_guidance::perception {
@@ -41,23 +43,36 @@ std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
   return {lo, hi};
 }
 
-// The bilinear B, G, R of the frame at (x, y), which lies in [0, cols - 1) x [0, rows - 1).
-cv::Vec3f bilinearColour(cv::Mat const& bgr, double x, double y) {
-  int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  cv::Vec3b const* a = bgr.ptr<cv::Vec3b>(y0) + x0;
-  cv::Vec3b const* b = bgr.ptr<cv::Vec3b>(y0 + 1) + x0;
-  cv::Vec3f c;
-  for (int ch = 0; ch < 3; ++ch)
-    c[ch] = (1.f - fy) * ((1.f - fx) * a[0][ch] + fx * a[1][ch]) + fy * ((1.f - fx) * b[0][ch] + fx * b[1][ch]);
-  return c;
-}
-
 // The distance from colour x to the nearest of `colours`.
 float distanceTo(std::vector<cv::Vec3f> const& colours, cv::Vec3f const& x) {
   float d = std::numeric_limits<float>::infinity();
   for (cv::Vec3f const& c : colours) d = std::min(d, (x - c).dot(x - c));
   return std::sqrt(d);
+}
+// How far along u from e the shaft runs: where the shorter of its two lines' edge points ends.
+double shaftEndAlong(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen::Vector2d const& e, Eigen::Vector2d const& u) {
+  double t_end = std::numeric_limits<double>::infinity();
+  for (auto const& side : edges) {
+    double t = -std::numeric_limits<double>::infinity();
+    for (auto const& q : side) t = std::max(t, u.dot(q - e));
+    t_end = std::min(t_end, t);
+  }
+  return t_end;
+}
+
+// Marks in `reached` (CV_8U) the samples with share over one half connected (4-neighbours) to the
+// seeds in `stack`, which are marked already.
+void flood(cv::Mat const& share, cv::Mat& reached, std::vector<cv::Point> stack) {
+  while (!stack.empty()) {
+    cv::Point const q = stack.back();
+    stack.pop_back();
+    for (cv::Point const n : {q + cv::Point(1, 0), q - cv::Point(1, 0), q + cv::Point(0, 1), q - cv::Point(0, 1)}) {
+      if (n.x < 0 || n.y < 0 || n.x >= share.cols || n.y >= share.rows || reached.at<std::uint8_t>(n) || !(share.at<float>(n) > 0.5f))
+        continue;
+      reached.at<std::uint8_t>(n) = 1;
+      stack.push_back(n);
+    }
+  }
 }
 }  // namespace
 
@@ -69,13 +84,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), to_tip = geometry::footOnLine(ax, c.tip_px) - e;
   if (!(to_tip.norm() > 1.0) || edges[0].empty() || edges[1].empty()) return std::nullopt;
   Eigen::Vector2d const u = to_tip.normalized(), v(-u.y(), u.x());
-  // The shaft's end: where the shorter of its two lines' edge points ends.
-  double t_end = std::numeric_limits<double>::infinity();
-  for (auto const& side : edges) {
-    double t = -std::numeric_limits<double>::infinity();
-    for (auto const& q : side) t = std::max(t, u.dot(q - e));
-    t_end = std::min(t_end, t);
-  }
+  double const t_end = shaftEndAlong(edges, e, u);
   if (!(t_end > 1.0)) return std::nullopt;
   Eigen::Vector2d const end = e + t_end * u;
   double const width = geometry::shaftWidthAt(c, end);
@@ -97,7 +106,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
     if (!(x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 && qx < fov.cols - 1 &&
           qy < fov.rows - 1 && fov.at<std::uint8_t>(static_cast<int>(std::lround(q.y())), static_cast<int>(std::lround(q.x()))) != 0))
       return false;
-    colour_x = bilinearColour(bgr, x.x(), x.y());
+    bilinearAt(bgr, x.x(), x.y(), colour_x.val);
     float const fx = static_cast<float>(q.x() - qx), fy = static_cast<float>(q.y() - qy);
     float const* p0 = instrument.ptr<float>(qy) + qx;
     float const* p1 = instrument.ptr<float>(qy + 1) + qx;
@@ -149,15 +158,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
       }
     }
   if (stack.empty()) return std::nullopt;
-  while (!stack.empty()) {
-    cv::Point const q = stack.back();
-    stack.pop_back();
-    for (cv::Point const n : {q + cv::Point(1, 0), q - cv::Point(1, 0), q + cv::Point(0, 1), q - cv::Point(0, 1)}) {
-      if (n.x < 0 || n.y < 0 || n.x >= cols || n.y >= rows || reached.at<std::uint8_t>(n) || !(share.at<float>(n) > 0.5f)) continue;
-      reached.at<std::uint8_t>(n) = 1;
-      stack.push_back(n);
-    }
-  }
+  flood(share, reached, std::move(stack));
   // The farthest reach: the rows whose last sample reached is farthest, each sought every quarter
   // px from there to the next column for where the share crosses one half (linear between samples).
   int k_far = -1;

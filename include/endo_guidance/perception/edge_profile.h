@@ -1,6 +1,7 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #pragma once
 
+#include <cstdint>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <vector>
@@ -11,6 +12,16 @@
 #include "endo_guidance/perception/line_fit.h"
 
 namespace endo_guidance::perception {
+
+/// The bilinear B, G, R of `bgr` (CV_8UC3) at (x, y), which must lie in [0, cols - 1) x [0, rows - 1).
+inline void bilinearAt(cv::Mat const& bgr, double x, double y, float (&c)[3]) {
+  int const x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  float const fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  std::uint8_t const* p0 = bgr.ptr<std::uint8_t>(y0) + 3 * x0;
+  std::uint8_t const* p1 = bgr.ptr<std::uint8_t>(y0 + 1) + 3 * x0;
+  for (int k = 0; k < 3; ++k)
+    c[k] = (1 - fy) * ((1 - fx) * p0[k] + fx * p0[k + 3]) + fy * ((1 - fx) * p1[k] + fx * p1[k + 3]);
+}
 
 /// The channel in which the contour lines are located with sub-pixel precision (steepest descent
 /// from tissue into the shaft): the chroma max - min, which separates grey and black shafts from
