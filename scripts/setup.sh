@@ -17,7 +17,7 @@ PKGS=(
   libcamera-info-manager-dev ros-camera-calibration python3-cv-bridge python3-image-geometry python3-diagnostic-msgs python3-tf2-msgs
   libtf2-ros-dev libtf2-geometry-msgs-dev libtf2-eigen-dev
   libdiagnostic-updater-dev libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
-  librosbag-dev python3-rosbag python3-rostopic python3-sensor-msgs rosbash ros-core
+  librosbag-dev libroslz4-dev libbz2-dev python3-rosbag python3-rostopic python3-sensor-msgs rosbash ros-core
   libopencv-dev libeigen3-dev libvisp-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev librostest-dev python3-rostest
   rviz xvfb xauth imagemagick image-transport-tools python3-matplotlib python3-opencv

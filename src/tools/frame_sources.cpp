@@ -1,6 +1,8 @@
 // Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
 #include "frame_sources.h"
 
+#include "bag_structure.h"
+
 #include <cv_bridge/cv_bridge.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -9,8 +11,6 @@
 #include <sensor_msgs/Image.h>
 
 #include <cmath>
-#include <cstdint>
-#include <cstdio>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
@@ -19,80 +19,6 @@
 namespace endo_guidance::tools {
 
 namespace {
-
-// Bag format 2.0 (wiki.ros.org/Bags/Format/2.0): records of <header_len><header><data_len><data>,
-// a header being fields <field_len><name>=<value>; chunks hold such records. rosbag_storage reads
-// past its buffer when a length is corrupt (found by fuzz_readers), so every length of the file
-// and of its uncompressed chunks is checked first. "" when sound, else why not.
-std::string bagStructureError(std::string const& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return "cannot open";
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(f, std::fclose);
-  char magic[13];
-  if (std::fread(magic, 1, 13, f) != 13 || std::string(magic, 13) != "#ROSBAG V2.0\n") return "not a version 2.0 bag";
-  std::fseek(f, 0, SEEK_END);
-  long const size = std::ftell(f);
-  auto u32 = [](unsigned char const* p) { return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24; };
-  // Checks the fields of one header; *op and *compression from its "op" and "compression" fields.
-  auto header = [&](unsigned char const* h, std::uint32_t n, int* op, std::string* compression) {
-    for (std::uint32_t i = 0; i < n;) {
-      if (n - i < 4) return false;
-      std::uint32_t const len = u32(h + i);
-      i += 4;
-      if (len > n - i) return false;
-      std::string const field(reinterpret_cast<char const*>(h + i), len);
-      auto const eq = field.find('=');
-      if (eq == std::string::npos) return false;
-      if (field.compare(0, eq, "op") == 0 && len == eq + 2) *op = static_cast<unsigned char>(field[eq + 1]);
-      if (field.compare(0, eq, "compression") == 0) *compression = field.substr(eq + 1);
-      i += len;
-    }
-    return true;
-  };
-  // The records of a chunk's data, each within it.
-  auto records = [&](std::vector<unsigned char> const& b) {
-    for (std::size_t i = 0; i < b.size();) {
-      if (b.size() - i < 4) return false;
-      std::uint32_t const hl = u32(&b[i]);
-      i += 4;
-      int op = -1;
-      std::string c;
-      if (hl > b.size() - i || !header(&b[i], hl, &op, &c)) return false;
-      i += hl;
-      if (b.size() - i < 4) return false;
-      std::uint32_t const dl = u32(&b[i]);
-      i += 4;
-      if (dl > b.size() - i) return false;
-      i += dl;
-    }
-    return true;
-  };
-  long pos = 13;
-  std::vector<unsigned char> buf;
-  while (pos < size) {
-    unsigned char len[4];
-    std::fseek(f, pos, SEEK_SET);
-    if (size - pos < 4 || std::fread(len, 1, 4, f) != 4) return "truncated record";
-    std::uint32_t const hl = u32(len);
-    if (hl > static_cast<std::uint64_t>(size - pos - 4)) return "a record header runs past the end of the file";
-    buf.resize(hl);
-    if (std::fread(buf.data(), 1, hl, f) != hl) return "truncated record header";
-    int op = -1;
-    std::string compression = "none";
-    if (!header(buf.data(), hl, &op, &compression)) return "corrupt record header";
-    if (std::fread(len, 1, 4, f) != 4) return "truncated record";
-    std::uint32_t const dl = u32(len);
-    long const data = pos + 8 + static_cast<long>(hl);
-    if (dl > static_cast<std::uint64_t>(size - data)) return "a record's data runs past the end of the file";
-    if (op == 0x05 && compression == "none") {  // a chunk: its records too
-      buf.resize(dl);
-      if (std::fread(buf.data(), 1, dl, f) != dl) return "truncated chunk";
-      if (!records(buf)) return "corrupt chunk";
-    }
-    pos = data + static_cast<long>(dl);
-  }
-  return "";
-}
 
 class ImageFiles : public Source {
  public:

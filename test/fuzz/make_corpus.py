@@ -120,22 +120,22 @@ def readers_seeds():
         import rosbag
         import rospy
         from sensor_msgs.msg import CameraInfo, CompressedImage, Image
-        p = os.path.join(tmp, "b.bag")
-        with rosbag.Bag(p, "w") as bag:
-            ci = CameraInfo(width=32, height=24, K=[30, 0, 16, 0, 30, 12, 0, 0, 1], P=[30, 0, 16, 0, 0, 30, 12, 0, 0, 0, 1, 0])
-            bag.write("/endoscope/camera_info", ci, rospy.Time(1))
-            for k in range(2):
-                m = Image(height=24, width=32, encoding="bgr8", step=96, data=img.tobytes())
-                m.header.stamp = rospy.Time(1 + k)
-                bag.write("/endoscope/image_raw", m, rospy.Time(1 + k))
-            c = CompressedImage(format="jpeg", data=cv2.imencode(".jpg", img)[1].tobytes())
-            c.header.stamp = rospy.Time(3)
-            bag.write("/endoscope/image_raw", c, rospy.Time(3))
-            bad = Image(height=24, width=32, encoding="16UC3", step=5, data=b"\x01\x02")
-            bag.write("/endoscope/image_raw", bad, rospy.Time(4))
-        with open(p, "rb") as f:
-            write("readers", "recording.bag", bytes([5]) + f.read())
-
+        for name, compression in [("recording.bag", "none"), ("recording_lz4.bag", "lz4")]:
+            p = os.path.join(tmp, name)
+            with rosbag.Bag(p, "w", compression=compression, chunk_threshold=1) as bag:
+                ci = CameraInfo(width=32, height=24, K=[30, 0, 16, 0, 30, 12, 0, 0, 1], P=[30, 0, 16, 0, 0, 30, 12, 0, 0, 0, 1, 0])
+                bag.write("/endoscope/camera_info", ci, rospy.Time(1))
+                for k in range(2):
+                    m = Image(height=24, width=32, encoding="bgr8", step=96, data=img.tobytes())
+                    m.header.stamp = rospy.Time(1 + k)
+                    bag.write("/endoscope/image_raw", m, rospy.Time(1 + k))
+                c = CompressedImage(format="jpeg", data=cv2.imencode(".jpg", img)[1].tobytes())
+                c.header.stamp = rospy.Time(3)
+                bag.write("/endoscope/image_raw", c, rospy.Time(3))
+                bad = Image(height=24, width=32, encoding="16UC3", step=5, data=b"\x01\x02")
+                bag.write("/endoscope/image_raw", bad, rospy.Time(4))
+            with open(p, "rb") as f:
+                write("readers", name, bytes([5]) + f.read())
 
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--videos":
