@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <opencv2/imgproc.hpp>
 #include <utility>
 #include <vector>
 
@@ -26,9 +27,11 @@ std::vector<cv::Vec3f> twoColours(std::vector<cv::Vec3f> const& all) {
   std::vector<cv::Vec3f> c;
   std::vector<float> b;
   for (std::size_t i = 0; i < all.size(); i += step) c.push_back(all[i]), b.push_back(all[i][0] + all[i][1] + all[i][2]);
-  std::vector<float> sorted = b;
-  std::sort(sorted.begin(), sorted.end());
-  float split = 0.5f * (sorted[sorted.size() / 20] + sorted[sorted.size() - 1 - sorted.size() / 20]);
+  std::vector<float> order = b;
+  auto const p5 = order.begin() + order.size() / 20, p95 = order.end() - 1 - order.size() / 20;
+  std::nth_element(order.begin(), p5, order.end());
+  std::nth_element(p5, p95, order.end());
+  float split = 0.5f * (*p5 + *p95);
   cv::Vec3f lo, hi;
   for (int pass = 0; pass < 2; ++pass) {
     lo = hi = cv::Vec3f(0.f, 0.f, 0.f);
@@ -49,6 +52,40 @@ float distanceTo(std::vector<cv::Vec3f> const& colours, cv::Vec3f const& x) {
   for (cv::Vec3f const& c : colours) d = std::min(d, (x - c).dot(x - c));
   return std::sqrt(d);
 }
+// The instrument's share of a colour x: its distance to the tissue's colours over that plus its
+// distance to the instrument's (the segment between its two: a shaft's end blends into its jaws).
+// On a blend of tissue and instrument it is the instrument's fraction.
+struct Share {
+  cv::Vec3f t0, t1, i0, d;  // the tissue's two colours (one twice), the instrument's from i0 to i0 + d
+  float inv_span;           // 1 / |d|^2, 0 when the instrument has one colour
+  // Over n colours given as planes (b, g, r), 0 where !inside; one loop the compiler vectorises.
+  void operator()(float const* __restrict b, float const* __restrict g, float const* __restrict r, std::uint8_t const* __restrict inside,
+                  int n, float* __restrict out) const {
+    float const t00 = t0[0], t01 = t0[1], t02 = t0[2], t10 = t1[0], t11 = t1[1], t12 = t1[2];
+    float const i00 = i0[0], i01 = i0[1], i02 = i0[2], d0 = d[0], d1 = d[1], d2 = d[2], inv = inv_span;
+    for (int i = 0; i < n; ++i) {
+      float const x0 = b[i], x1 = g[i], x2 = r[i];
+      float const a0 = x0 - t00, a1 = x1 - t01, a2 = x2 - t02, b0 = x0 - t10, b1 = x1 - t11, b2 = x2 - t12;
+      float const da = a0 * a0 + a1 * a1 + a2 * a2, db = b0 * b0 + b1 * b1 + b2 * b2;
+      float const dt = std::sqrt(da < db ? da : db);
+      float const y0 = x0 - i00, y1 = x1 - i01, y2 = x2 - i02;
+      float const along = (y0 * d0 + y1 * d1 + y2 * d2) * inv;
+      float const lambda = along < 0.f ? 0.f : along > 1.f ? 1.f : along;
+      float const o0 = y0 - lambda * d0, o1 = y1 - lambda * d1, o2 = y2 - lambda * d2;
+      float const di = std::sqrt(o0 * o0 + o1 * o1 + o2 * o2);
+      float const sum = dt + di;
+      float const share = dt / (sum > 1e-20f ? sum : 1e-20f);
+      out[i] = inside[i] != 0 ? share : 0.f;
+    }
+  }
+  float operator()(cv::Vec3f const& x) const {
+    float s;
+    std::uint8_t const in = 1;
+    (*this)(&x[0], &x[1], &x[2], &in, 1, &s);
+    return s;
+  }
+};
+
 // How far along u from e the shaft runs: where the shorter of its two lines' edge points ends.
 double shaftEndAlong(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen::Vector2d const& e, Eigen::Vector2d const& u) {
   double t_end = std::numeric_limits<double>::infinity();
@@ -98,8 +135,8 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   int const cols = static_cast<int>(std::ceil(3.5 * width / dc)) + 1;
   int const half = static_cast<int>(std::ceil(0.8 * width / dr));
   int const rows = 2 * half + 1;
-  // A sample at x (full resolution): whether it lies in the field of view and the frame (a window
-  // past them is out), the frame's colour (bilinear) and the mask (bilinear, processing scale).
+  // A sample at x (full resolution) for the fine search: whether it lies in the field of view
+  // and the frame, the frame's colour (bilinear) and the mask (bilinear, processing scale).
   auto sample = [&](Eigen::Vector2d const& x, cv::Vec3f& colour_x, float& prob_x) {
     Eigen::Vector2d const q = toProcessing(x, scale);
     int const qx = static_cast<int>(std::floor(q.x())), qy = static_cast<int>(std::floor(q.y()));
@@ -114,10 +151,19 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
     return true;
   };
   auto at = [&](double t, double a) { return Eigen::Vector2d(end + t * u + a * v); };  // t, a in px from the shaft's end
-  cv::Mat colour(rows, cols, CV_32FC3, cv::Scalar::all(0)), prob(rows, cols, CV_32F, cv::Scalar(0.5)), inside(rows, cols, CV_8U);
-  for (int r = 0; r < rows; ++r)
-    for (int k = 0; k < cols; ++k)
-      inside.at<std::uint8_t>(r, k) = sample(at((k - back) * dc, (r - half) * dr), colour.at<cv::Vec3f>(r, k), prob.at<float>(r, k));
+  // The window's samples, one warp per image: sample (k, r) lies at at((k - back) dc, (r - half) dr),
+  // at toProcessing() of that in the mask and the field of view (bilinear, and nearest).
+  Eigen::Vector2d const origin = at(-back * dc, -half * dr);
+  cv::Matx23d const to_frame(dc * u.x(), dr * v.x(), origin.x(), dc * u.y(), dr * v.y(), origin.y());
+  double const off = 0.5 * (scale - 1);
+  cv::Matx23d const to_mask(to_frame(0, 0) / scale, to_frame(0, 1) / scale, (origin.x() - off) / scale,  //
+                            to_frame(1, 0) / scale, to_frame(1, 1) / scale, (origin.y() - off) / scale);
+  cv::Mat colour8, prob, inside;
+  cv::warpAffine(bgr, colour8, to_frame, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+  cv::warpAffine(instrument, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+  cv::warpAffine(fov, inside, to_mask, {cols, rows}, cv::INTER_NEAREST | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::Mat colour;
+  colour8.convertTo(colour, CV_32FC3);
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
   // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
   // between the lines where closed jaws continue them, the mask may miss the jaws).
@@ -134,29 +180,20 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   for (cv::Vec3f const& m : twoColours(instrument_s))  // (one as the tissue's is the tissue between open jaws)
     if (distanceTo(tissue, m) >= min_contrast) tool.push_back(m);
   if (tissue.empty() || tool.empty()) return std::nullopt;
-  cv::Vec3f const i0 = tool.front(), i1 = tool.back();
-  float const span = (i1 - i0).dot(i1 - i0);
-  // The instrument's share of each sample: its distance to the tissue's colours over that plus
-  // its distance to the instrument's (the segment between its two: a shaft's end blends into its
-  // jaws). On a blend of tissue and instrument it is the instrument's fraction; its part
-  // connected to the shaft's end (4-neighbours, share over one half) is the instrument.
-  auto shareOf = [&](cv::Vec3f const& x) {
-    float const lambda = span > 0.f ? std::clamp((x - i0).dot(i1 - i0) / span, 0.f, 1.f) : 0.f;
-    cv::Vec3f const off = x - i0 - lambda * (i1 - i0);
-    float const dt = distanceTo(tissue, x), di = std::sqrt(off.dot(off));
-    return dt + di > 0.f ? dt / (dt + di) : 0.f;
-  };
-  cv::Mat share(rows, cols, CV_32F), reached = cv::Mat::zeros(rows, cols, CV_8U);
+  cv::Vec3f const d = tool.back() - tool.front();
+  Share const shareOf{tissue.front(), tissue.back(), tool.front(), d, d.dot(d) > 0.f ? 1.f / d.dot(d) : 0.f};
+  // The instrument: the samples of share over one half connected (4-neighbours) to the shaft's end.
+  cv::Mat planes[3], share(rows, cols, CV_32F), reached = cv::Mat::zeros(rows, cols, CV_8U);
+  cv::split(colour, planes);
+  shareOf(planes[0].ptr<float>(), planes[1].ptr<float>(), planes[2].ptr<float>(), inside.ptr<std::uint8_t>(), rows * cols,
+          share.ptr<float>());
   std::vector<cv::Point> stack;
   for (int r = 0; r < rows; ++r)
-    for (int k = 0; k < cols; ++k) {
-      float const s = inside.at<std::uint8_t>(r, k) ? shareOf(colour.at<cv::Vec3f>(r, k)) : 0.f;
-      share.at<float>(r, k) = s;
-      if (s > 0.5f && k <= back && std::abs(r - half) * dr <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
+    for (int k = 0; k <= back; ++k)
+      if (share.at<float>(r, k) > 0.5f && std::abs(r - half) * dr <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
         reached.at<std::uint8_t>(r, k) = 1;
         stack.emplace_back(k, r);
       }
-    }
   if (stack.empty()) return std::nullopt;
   flood(share, reached, std::move(stack));
   // The farthest reach: the rows whose last sample reached is farthest, each sought every quarter
