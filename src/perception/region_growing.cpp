@@ -44,6 +44,7 @@ std::optional<Region> RegionGrower::grow(cv::Point seed, int threshold, int seed
   for (std::size_t i = 1; i < contours.size(); ++i)
     if (contours[i].size() > contours[bj].size()) bj = i;
   r.boundary = std::move(contours[bj]);
+  r.mask = roi;
   return r;
 }
 

@@ -2,6 +2,7 @@
 #include "endo_guidance/perception/shaft_detector.h"
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -96,18 +97,24 @@ void removeDuplicateShafts(SegmentationResult& res, std::vector<std::size_t>& ke
 }
 
 void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat const* instrument) {
-  cv::Mat inside;  // (each region drawn alone, and cleared over its box after)
-  if (!instrument) inside = cv::Mat::zeros(frame.fov.mask.size(), CV_32F);
-  cv::Rect drawn;
   for (std::size_t i = 0; i < res.contours.size() && i < res.contour_regions.size() && i < res.edges.size(); ++i) {
-    if (!instrument) {
+    InstrumentMask mask;
+    if (instrument) {
+      mask.map = *instrument;
+    } else {  // the region: its own mask, or its polygon (a strip's quad) drawn over its box
       Region const& region = res.regions[res.contour_regions[i]];
-      inside(drawn).setTo(0.0);
-      cv::drawContours(inside, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(1.0), cv::FILLED);
-      drawn = cv::boundingRect(region.boundary) & cv::Rect(cv::Point(0, 0), inside.size());
+      cv::Rect const box = cv::boundingRect(region.boundary);
+      mask.origin = box.tl();
+      if (!region.mask.empty() && region.mask.size() == region.box.size()) {
+        mask.map = region.mask;
+        mask.origin = region.box.tl();
+      } else {
+        mask.map = cv::Mat::zeros(box.size(), CV_8U);
+        cv::drawContours(mask.map, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(255), cv::FILLED, cv::LINE_8,
+                         cv::noArray(), INT_MAX, -box.tl());
+      }
     }
-    if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], instrument ? *instrument : inside, frame.fov.mask,
-                                          frame.scale)) {
+    if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], mask, frame.fov.mask, frame.scale)) {
       res.contours[i].tip_px = *tip;
       res.contours[i] = onImageAxis(res.contours[i]);
     }

@@ -114,9 +114,9 @@ void flood(cv::Mat const& share, cv::Mat& reached, std::vector<cv::Point> stack)
 }  // namespace
 
 std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
-                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, cv::Mat const& instrument,
+                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
                                                 cv::Mat const& fov, int scale, double min_contrast) {
-  CV_Assert(bgr.type() == CV_8UC3 && instrument.type() == CV_32F && fov.type() == CV_8U && instrument.size() == fov.size());
+  CV_Assert(bgr.type() == CV_8UC3 && (instrument.map.type() == CV_32F || instrument.map.type() == CV_8U) && fov.type() == CV_8U);
   geometry::ImageLine const ax = geometry::imageAxis(c);
   Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), to_tip = geometry::footOnLine(ax, c.tip_px) - e;
   if (!(to_tip.norm() > 1.0) || edges[0].empty() || edges[1].empty()) return std::nullopt;
@@ -135,19 +135,15 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   int const cols = static_cast<int>(std::ceil(3.5 * width / dc)) + 1;
   int const half = static_cast<int>(std::ceil(0.8 * width / dr));
   int const rows = 2 * half + 1;
-  // A sample at x (full resolution) for the fine search: whether it lies in the field of view
-  // and the frame, the frame's colour (bilinear) and the mask (bilinear, processing scale).
-  auto sample = [&](Eigen::Vector2d const& x, cv::Vec3f& colour_x, float& prob_x) {
+  // A sample at x (full resolution) for the fine search: whether it lies in the frame and the
+  // field of view, and the frame's colour there (bilinear).
+  auto sample = [&](Eigen::Vector2d const& x, cv::Vec3f& colour_x) {
     Eigen::Vector2d const q = toProcessing(x, scale);
-    int const qx = static_cast<int>(std::floor(q.x())), qy = static_cast<int>(std::floor(q.y()));
-    if (!(x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 && qx < fov.cols - 1 &&
-          qy < fov.rows - 1 && fov.at<std::uint8_t>(static_cast<int>(std::lround(q.y())), static_cast<int>(std::lround(q.x()))) != 0))
+    int const qx = static_cast<int>(std::lround(q.x())), qy = static_cast<int>(std::lround(q.y()));
+    if (!(x.x() >= 0.0 && x.y() >= 0.0 && x.x() < bgr.cols - 1 && x.y() < bgr.rows - 1 && qx >= 0 && qy >= 0 && qx < fov.cols &&
+          qy < fov.rows && fov.at<std::uint8_t>(qy, qx) != 0))
       return false;
     bilinearAt(bgr, x.x(), x.y(), colour_x.val);
-    float const fx = static_cast<float>(q.x() - qx), fy = static_cast<float>(q.y() - qy);
-    float const* p0 = instrument.ptr<float>(qy) + qx;
-    float const* p1 = instrument.ptr<float>(qy + 1) + qx;
-    prob_x = (1.f - fy) * ((1.f - fx) * p0[0] + fx * p0[1]) + fy * ((1.f - fx) * p1[0] + fx * p1[1]);
     return true;
   };
   auto at = [&](double t, double a) { return Eigen::Vector2d(end + t * u + a * v); };  // t, a in px from the shaft's end
@@ -156,12 +152,16 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   Eigen::Vector2d const origin = at(-back * dc, -half * dr);
   cv::Matx23d const to_frame(dc * u.x(), dr * v.x(), origin.x(), dc * u.y(), dr * v.y(), origin.y());
   double const off = 0.5 * (scale - 1);
-  cv::Matx23d const to_mask(to_frame(0, 0) / scale, to_frame(0, 1) / scale, (origin.x() - off) / scale,  //
-                            to_frame(1, 0) / scale, to_frame(1, 1) / scale, (origin.y() - off) / scale);
+  cv::Matx23d const to_fov(to_frame(0, 0) / scale, to_frame(0, 1) / scale, (origin.x() - off) / scale,  //
+                           to_frame(1, 0) / scale, to_frame(1, 1) / scale, (origin.y() - off) / scale);
+  cv::Matx23d to_mask = to_fov;
+  to_mask(0, 2) -= instrument.origin.x;
+  to_mask(1, 2) -= instrument.origin.y;
   cv::Mat colour8, prob, inside;
   cv::warpAffine(bgr, colour8, to_frame, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
-  cv::warpAffine(instrument, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
-  cv::warpAffine(fov, inside, to_mask, {cols, rows}, cv::INTER_NEAREST | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::warpAffine(fov, inside, to_fov, {cols, rows}, cv::INTER_NEAREST | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::warpAffine(instrument.map, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
+  if (prob.type() == CV_8U) prob.convertTo(prob, CV_32F, 1.0 / 255.0);
   cv::Mat colour;
   colour8.convertTo(colour, CV_32FC3);
   // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
@@ -217,8 +217,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
     for (int i = 1; i <= steps; ++i) {
       double const ti = t0 + dc * i / steps;
       cv::Vec3f col;
-      float p = 0.f;
-      float const si = i == steps ? share.at<float>(r, k_far + 1) : sample(at(ti, a), col, p) ? shareOf(col) : 0.f;
+      float const si = i == steps ? share.at<float>(r, k_far + 1) : sample(at(ti, a), col) ? shareOf(col) : 0.f;
       if (si <= 0.5f) {
         t = ti - (dc / steps) * (0.5f - si) / std::max(1e-6f, prev - si);
         break;

@@ -50,6 +50,7 @@ struct Region {
   cv::Rect box;
   int area = 0;
   std::vector<cv::Point> boundary;   ///< closed, ordered (8-connected) outer boundary
+  cv::Mat mask;                      ///< CV_8U over `box`, non-zero on its pixels (a grown region; empty for a strip's quad)
 };
 
 /// Region growing from a seed over the 4-connected pixels whose (filtered) feature is at most a

@@ -23,11 +23,18 @@ namespace endo_guidance::perception {
 /// contour fit's). nullopt, and the mask's tip stands, when no instrument colour differs from
 /// the tissue's by `min_contrast` levels or the instrument runs on past that reach.
 ///
+/// A coarse instrument mask at the processing scale: a probability (CV_32F in [0, 1]) or a
+/// region (CV_8U, 255 on it) whose pixel (0, 0) is processing pixel `origin`; 0 outside it.
+struct InstrumentMask {
+  cv::Mat map;
+  cv::Point origin;
+};
+
 /// `edges`: the contour's edge points per line (ContourFit::edges: the shaft's end is where the
-/// shorter line ends); `instrument`: the mask (CV_32F, 1 inside, or a probability) at the
-/// processing scale, `fov`: the field of view's mask there, `scale`: processing to full resolution.
+/// shorter line ends); `fov`: the field of view's mask at the processing scale, `scale`: processing
+/// to full resolution.
 std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
-                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, cv::Mat const& instrument,
+                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
                                                 cv::Mat const& fov, int scale, double min_contrast = 20.0);
 
 }  // namespace endo_guidance::perception
