@@ -3,7 +3,7 @@
 
 Runs endo_guidance_offline on the rendered scenes (clean, hard, black_circular; the colour and
 the learned detector) and, with --shared, on the shared real data (the in-vivo stills of each
-operation as independent frames, the first frames of each robotic video). Each JSON line is kept
+operation as independent frames, the first frames of each robotic video; the colour method). Each JSON line is kept
 whole except `latency_ms` (timing) and `source` (reduced to the file name); the digest is taken
 over the canonical JSON (sorted keys).
 
@@ -68,7 +68,8 @@ def inputs(binary, tmp, shared):
         for op in ("OP1", "OP2", "OP3"):
             raw = os.path.join(invivo, op, "Raw")
             if os.path.isdir(raw):
-                out.append(("shared/invivo/%s" % op, ["--camera", invivo_cam, "--radius", "0.0025", "--independent", raw]))
+                out.append(("shared/invivo/%s" % op,
+                            ["--detector", "colour", "--camera", invivo_cam, "--radius", "0.0025", "--independent", raw]))
         robotic = os.path.join(shared, "endovis15_robotic")
         cam = os.path.join(HERE, "config", "cameras", "assumed_720x576.yaml")
         for ds in ("Dataset1", "Dataset2"):
@@ -76,7 +77,7 @@ def inputs(binary, tmp, shared):
             if os.path.isdir(frames):
                 first = sorted(f for f in os.listdir(frames) if f.endswith(".png"))[:ROBOTIC_FRAMES]
                 out.append(("shared/robotic/%s" % ds,
-                            ["--camera", cam, "--radius", "0.004"] + [os.path.join(frames, f) for f in first]))
+                            ["--detector", "colour", "--camera", cam, "--radius", "0.004"] + [os.path.join(frames, f) for f in first]))
     return out
 
 

@@ -14,9 +14,12 @@
 #include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/sim/scene_renderer.h"
 
+#include "colour_params.h"
+
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
+using endo_guidance::test::colourParams;
 
 TEST(ContourLines, LMedSSurvivesOutliers) {
   std::mt19937_64 rng(1);
@@ -208,7 +211,7 @@ TEST(ContourLines, ScoredProfilesAreReusedExactly) {
   SyntheticScene scene(defaultInstruments());
   SceneRenderer renderer(640, 480, RenderOptions{});
   cv::Mat const img = renderer.render(scene.frame(60), 60);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   SegmentationResult const res = seg.process(img);
   int checked = 0;
   for (std::size_t i = 0; i < res.regions.size(); ++i) {
@@ -255,7 +258,7 @@ TEST(ContourLines, RenderedShaftMatchesTruthAndBlobIsRejected) {
   SceneRenderer renderer(640, 480, ro);
   // Frame 60: three separate shafts (see test_segmentation for whole sequences).
   auto const views = scene.frame(60);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   auto const res = seg.process(renderer.render(views, 60));
   int matched = 0;
   for (auto const& v : views)
@@ -272,7 +275,7 @@ TEST(ContourLines, RenderedShaftMatchesTruthAndBlobIsRejected) {
   // A round blob on the border is not a shaft.
   cv::Mat img(240, 320, CV_8UC3, cv::Scalar(60, 70, 170));
   cv::circle(img, {160, 239}, 60, cv::Scalar(140, 140, 140), -1, cv::LINE_AA);
-  EXPECT_TRUE(InstrumentSegmenter().process(img).contours.empty());
+  EXPECT_TRUE(InstrumentSegmenter(colourParams()).process(img).contours.empty());
 }
 
 TEST(ContourLines, RectifiedContourOfDistortedEdgesIsTheStraightLine) {
@@ -507,7 +510,7 @@ TEST(ContourLines, AShaftMergedWithGauzeAtItsEntryIsFoundBesideItsStraightSide) 
     }
     return false;
   };
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;  // the region alone
   EXPECT_TRUE(found(sp));
   sp.contours.min_parallel_side_ratio = 0.0;  // no parallel side: the merged region is refused
@@ -563,7 +566,7 @@ TEST(ContourLines, TheParallelSideIsBesideTheOtherNotOnATouchingInstrument) {
   cv::Mat const img = renderer.render(views, 20);
   ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom
   // The segmenter's own filtered feature and field of view (processing scale 2) for this frame.
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   seg.process(img);
   FieldOfView const& fov = seg.fieldOfView();
   RegionGrower grower;
@@ -762,7 +765,7 @@ TEST(ContourLines, AShaftEnteringThroughACornerEntersTheView) {
     cv::fillConvexPoly(img, poly, cv::Scalar(140, 140, 142), cv::LINE_AA, 4);
     return img;
   };
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.contours.min_entry_sine = 0.5;
   auto found = [&](cv::Mat const& img, SegmentationParams const& p) {
     auto const res = InstrumentSegmenter(p).process(img);

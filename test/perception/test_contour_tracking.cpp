@@ -12,9 +12,12 @@
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 
+#include "colour_params.h"
+
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
+using endo_guidance::test::colourParams;
 
 namespace {
 
@@ -49,7 +52,7 @@ Eigen::Vector2d endAt(int k) { return Eigen::Vector2d(300.0 + 3.0 * k, 200.0); }
 }  // namespace
 
 TEST(ContourTracking, FollowsAPivotingShaftBetweenDetections) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 4;
   InstrumentSegmenter seg(p);
   double width0 = 0.0;
@@ -82,7 +85,7 @@ TEST(ContourTracking, FollowsAPivotingShaftBetweenDetections) {
 // per frame, then pulled back 16 px per frame, with a detection every 4 frames, a tracked frame
 // reports the last detection's tip (on its own axis), a detection frame the shaft's end.
 TEST(ContourTracking, TheTipIsHeldBetweenDetectionsAndMeasuredAtEach) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 4;
   InstrumentSegmenter seg(p);
   std::vector<double> ends;
@@ -111,7 +114,7 @@ TEST(ContourTracking, TheTipIsHeldBetweenDetectionsAndMeasuredAtEach) {
 // chroma is as low as the metal's, but beyond the straight sides only 2.5 widths may follow in
 // the detection, whose tip the tracked frames hold.
 TEST(ContourTracking, TheTipDoesNotRunAlongAPaleMembrane) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 20;
   InstrumentSegmenter seg(p);
   Eigen::Vector2d const a(320.0, 700.0), b(320.0, 330.0);
@@ -128,7 +131,7 @@ TEST(ContourTracking, TheTipDoesNotRunAlongAPaleMembrane) {
 }
 
 TEST(ContourTracking, ALostShaftMakesADetectionFrame) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 10;
   InstrumentSegmenter seg(p);
   ASSERT_EQ(seg.process(bar(kPivot, endAt(0))).contours.size(), 1u);
@@ -150,7 +153,7 @@ TEST(ContourTracking, ALostShaftMakesADetectionFrame) {
 }
 
 TEST(ContourTracking, DetectEveryFrameNeverTracks) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 1;
   InstrumentSegmenter seg(p);
   for (int k = 0; k < 4; ++k) {
@@ -162,7 +165,7 @@ TEST(ContourTracking, DetectEveryFrameNeverTracks) {
 }
 
 TEST(ContourTracking, RefusesAWidthJumpAndAShaftThatLeftItsLines) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   InstrumentSegmenter seg(p);
   Eigen::Vector2d const a(320.0, 700.0), b(320.0, 200.0);
   cv::Mat const im = bar(a, b);
@@ -199,7 +202,7 @@ TEST(ContourTracking, TheTrackedTipHoldsTheDetectedTipOnAStillImage) {
   for (auto const& v : scene.frame(30))
     if (auto w = viewOfInstrument(so.K, so.width, so.height, v.trocar_c, v.tip_c, v.radius, v.instrument, 0.012)) views.push_back(*w);
   cv::Mat const im = renderer.render(views, 30);
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.tracking.detect_every = 4;
   InstrumentSegmenter seg(p);
   std::vector<ApparentContour> detected;

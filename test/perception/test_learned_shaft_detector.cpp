@@ -77,7 +77,9 @@ TEST(LearnedShaftDetector, MissingOrCorruptModelIsAClearErrorAtConstruction) {
   sp.detector = SegmentationParams::Detector::kLearned;
   sp.learned.model = "/nonexistent/shaft_net.yaml";
   EXPECT_THROW(InstrumentSegmenter{sp}, std::runtime_error);
-  InstrumentSegmenter seg;
+  SegmentationParams colour;
+  colour.detector = SegmentationParams::Detector::kColour;
+  InstrumentSegmenter seg(colour);
   EXPECT_THROW(seg.setParams(sp), std::runtime_error);
   EXPECT_EQ(seg.params().detector, SegmentationParams::Detector::kColour);
 }

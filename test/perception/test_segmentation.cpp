@@ -13,6 +13,7 @@
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/sim/scene_renderer.h"
 
+#include "colour_params.h"
 #include "contour_test_util.h"
 
 using namespace endo_guidance::perception;
@@ -21,6 +22,8 @@ using namespace endo_guidance::sim;
 using endo_guidance::test::bandContour;
 using endo_guidance::test::lineErrorOverItsExtent;
 using namespace endo_guidance::pipeline;
+using endo_guidance::test::colourParams;
+using endo_guidance::test::colourPipelineParams;
 
 namespace {
 // The hard evaluation scene (endo_guidance_eval_synthetic --scene hard): 2 mm of breathing.
@@ -60,7 +63,7 @@ Stats run(RenderOptions const& ro, int frames, std::size_t instruments = 3) {
   motions.resize(std::min(instruments, motions.size()));
   SyntheticScene scene(motions);
   SceneRenderer renderer(640, 480, ro);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   Stats s;
   for (int k = 0; k < frames; ++k) {
     auto const views = scene.frame(k);
@@ -186,7 +189,7 @@ TEST(Segmentation, TheTipIsTheJawsEndOnTheFrame) {
 }
 
 TEST(Segmentation, RejectsBadInput) {
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   EXPECT_THROW(seg.process(cv::Mat()), cv::Exception);
   EXPECT_THROW(seg.process(cv::Mat(10, 10, CV_8U)), cv::Exception);
   // A plain tissue image: no shaft.
@@ -197,7 +200,7 @@ TEST(Segmentation, RejectsBadInput) {
 // field of view read an empty channel list) is segmented, finding nothing, and so is 1x1.
 TEST(Segmentation, FramesOfOnePixelEitherWay) {
   for (cv::Size size : {cv::Size(1920, 1), cv::Size(1, 1080), cv::Size(1, 1), cv::Size(1500, 3)}) {
-    InstrumentSegmenter seg;
+    InstrumentSegmenter seg(colourParams());
     SegmentationResult r;
     EXPECT_NO_THROW(r = seg.process(cv::Mat(size, CV_8UC3, cv::Scalar(60, 70, 170)))) << size;
     EXPECT_TRUE(r.contours.empty()) << size;
@@ -208,7 +211,7 @@ TEST(Segmentation, FramesOfOnePixelEitherWay) {
 // tissue it mirrors) is searched at every growth level in that same frame, not lost until the
 // next full search. (The strip search is off here: it would find the shaft on its own.)
 TEST(Segmentation, TrackedShaftFoundAgainWhenItsLevelJumps) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.strip.enabled = false;
   p.tracking.detect_every = 1;  // every frame a detection frame: the seed memory is under test
   InstrumentSegmenter seg(p);
@@ -241,7 +244,7 @@ TEST(Segmentation, EntryAndTipOnTheImageAxis) {
   Eigen::Vector2d const a(60.0, 540.0), b(470.0, 300.0);
   Eigen::Vector2d const d = (b - a).normalized();
   cv::Mat const im = greyBarOnTissue(a, b);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   auto const res = seg.process(im);
   ASSERT_EQ(res.contours.size(), 1u);
   auto const& c = res.contours[0];
@@ -263,7 +266,7 @@ TEST(Segmentation, EntryAndTipOnTheImageAxis) {
 TEST(Segmentation, ShaftEnteringNearACorner) {
   Eigen::Vector2d const a(700.0, 470.0), b(250.0, 432.0);  // 4.8 deg to the bottom
   cv::Mat const im = greyBarOnTissue(a, b);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   auto const res = seg.process(im);
   ASSERT_FALSE(res.seeds.empty());
   std::printf("seed (%d, %d) at processing scale\n", res.seeds[0].position.x, res.seeds[0].position.y);
@@ -282,7 +285,7 @@ TEST(Segmentation, ShaftInsideARegionRefusedForAnotherSeed) {
   HardScene hard;
   SyntheticScene& scene = hard.scene;
   SceneRenderer const& renderer = hard.renderer;
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   int right = 0, right_found = 0, unmatched = 0;
   for (int k = 0; k < 20; ++k) {
     auto const views = scene.frame(k);
@@ -330,11 +333,11 @@ TEST(Segmentation, AShaftMergedWithGauzeOnBothSidesIsFoundFromItsOwnEntry) {
     return false;
   };
   for (int k : {100, 105, 116}) {
-    SegmentationParams sp;
+    SegmentationParams sp = colourParams();
     EXPECT_TRUE(found(k, sp)) << "frame " << k;
     sp.resought_min_entry_sine = 1.0;
     EXPECT_FALSE(found(k, sp)) << "frame " << k;
-    sp = SegmentationParams{};
+    sp = colourParams();
     sp.contours.min_parallel_side_ratio = 0.0;
     EXPECT_FALSE(found(k, sp)) << "frame " << k;
   }
@@ -356,7 +359,7 @@ TEST(Segmentation, AShaftBesideAGreyBlobOnTheBorderIsGrownAtTheAbsoluteLevels) {
     auto const views = scene.frame(k);
     ApparentContour const& truth = views[0].truth;  // the left shaft, entering at the bottom-left
     ASSERT_LT(truth.entry_px.x(), 5.0);
-    auto const res = InstrumentSegmenter().process(renderer.render(views, k));
+    auto const res = InstrumentSegmenter(colourParams()).process(renderer.render(views, k));
     bool found = false;
     for (auto const& c : res.contours) {
       double e = 0.0;
@@ -380,7 +383,7 @@ TEST(Segmentation, AShaftWithTwoSeedsIsReportedOnce) {
   SyntheticSceneOptions so;
   SyntheticScene scene(defaultInstruments(), so);
   SceneRenderer renderer(so.width, so.height, RenderOptions{});
-  Pipeline pipe(so.K, cv::Size(so.width, so.height), PipelineParams{});
+  Pipeline pipe(so.K, cv::Size(so.width, so.height), colourPipelineParams());
   int twice = 0, duplicates = 0, shafts = 0, found = 0;
   for (int k = 0; k <= 56; ++k) {
     auto const views = scene.frame(k);
@@ -414,7 +417,7 @@ TEST(Segmentation, AWedgeWideningThreefoldIsNotAShaft) {
     cv::fillConvexPoly(im, poly, cv::Scalar(110, 110, 110), cv::LINE_AA);
     return im;
   };
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   {
     InstrumentSegmenter seg(p);
     EXPECT_EQ(seg.process(wedge(24.0, 36.0)).contours.size(), 1u);
@@ -432,15 +435,15 @@ TEST(Segmentation, AWedgeWideningThreefoldIsNotAShaft) {
 }
 
 TEST(Segmentation, ParametersItCannotWorkWithAreRefused) {
-  SegmentationParams p;
+  SegmentationParams p = colourParams();
   p.regions.thresholds.clear();
   EXPECT_THROW(InstrumentSegmenter{p}, std::invalid_argument);
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   EXPECT_THROW(seg.setParams(p), std::invalid_argument);
-  p = SegmentationParams{};
+  p = colourParams();
   p.processing_width = 0;
   EXPECT_THROW(seg.setParams(p), std::invalid_argument);
-  EXPECT_EQ(seg.params().processing_width, SegmentationParams{}.processing_width);  // unchanged
+  EXPECT_EQ(seg.params().processing_width, colourParams().processing_width);  // unchanged
 }
 
 // The bar's lower side, followed from its entry, runs along the blob down to the bottom border:
@@ -462,10 +465,10 @@ TEST(Segmentation, ASideRunningAlongABlobToTheBorderIsSoughtAgainBeyondIt) {
     return e < 1.0 && c.entry_px.x() < 10.0 && c.tip_px.x() > 400.0;
   };
   cv::Mat const im = barWithBlobToTheBorder(false);
-  auto const res = InstrumentSegmenter().process(im);
+  auto const res = InstrumentSegmenter(colourParams()).process(im);
   ASSERT_EQ(res.contours.size(), 1u);
   EXPECT_TRUE(onBar(res.contours[0]));
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.contours.min_parallel_side_ratio = 0.0;
   for (auto const& c : InstrumentSegmenter(sp).process(im).contours) EXPECT_FALSE(onBar(c));
 }
@@ -476,7 +479,7 @@ TEST(Segmentation, ASideRunningAlongABlobToTheBorderIsSoughtAgainBeyondIt) {
 // band across a corner of the view, robotic Dataset 2). With the bound at 0, taken.
 TEST(Segmentation, AReSoughtBandWithItsTipOnTheBorderIsNotAShaft) {
   cv::Mat const im = barWithBlobToTheBorder(true);
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;  // (it finds the bar from its right end, and the blob)
   auto const res = InstrumentSegmenter(sp).process(im);
   EXPECT_TRUE(res.contours.empty());
@@ -498,7 +501,7 @@ TEST(Segmentation, AReSoughtBandWithItsTipOnTheBorderIsNotAShaft) {
 // the crossing seeds.
 TEST(Segmentation, AShaftCrossingAnotherIsFoundBeyondIt) {
   cv::Mat const im = crossingBars(true);
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;
   auto const res = InstrumentSegmenter(sp).process(im);
   ASSERT_EQ(res.contours.size(), 2u);
@@ -514,7 +517,7 @@ TEST(Segmentation, AShaftCrossingAnotherIsFoundBeyondIt) {
 // back along its axis across A finds tissue, not a shaft going on under A: refused as not
 // continued (a blob or a jaw beside a shaft ends at it).
 TEST(Segmentation, ABarStartingAtAShaftIsNotACrossingShaft) {
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;
   auto const res = InstrumentSegmenter(sp).process(crossingBars(false));
   ASSERT_EQ(res.contours.size(), 1u);  // A
@@ -533,7 +536,7 @@ TEST(Segmentation, ABarStartingAtAShaftIsNotACrossingShaft) {
 TEST(Segmentation, TheHardScenesCrossingShaftIsFoundBeyondTheCrossing) {
   HardScene hard;
   auto count = [&](bool crossing_seeds) {
-    PipelineParams pp;
+    PipelineParams pp = colourPipelineParams();
     pp.segmentation.crossing_seeds = crossing_seeds;
     int found = 0;
     // (the insertion points are known well before frame 266)
@@ -559,7 +562,7 @@ TEST(Segmentation, TheHardScenesCrossingShaftIsFoundBeyondTheCrossing) {
 // same depth), and a shaft's part beyond another narrows or keeps its width away from it (the
 // hard scene's false pairs of this kind: jaws at 0.2x, blobs widening 1.9x). Refused, saying why.
 TEST(Segmentation, ACrossingBarTooThinOrWideningIsNotAShaft) {
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;
   for (auto const& [bottom, top, why] : {std::tuple<int, int, ContourRejection>{8, 8, ContourRejection::kTooThin},
                                          std::tuple<int, int, ContourRejection>{34, 60, ContourRejection::kWidens}}) {
@@ -590,8 +593,8 @@ TEST(Segmentation, ASeedOnlyUnderTheRelaxedThresholdHasNoStripSearch) {
   EXPECT_LT(f.exact(90, 95, 126), 55.f);
   EXPECT_LT(f.exact(100, 104, 123), 40.f);
   std::vector<Eigen::Vector3d> const trocar{Eigen::Vector3d(-400.0, 240.0, 1.0)};  // left of the view
-  auto const relaxed = InstrumentSegmenter().process(blob(cv::Scalar(90, 95, 126)), trocar);
-  auto const ordinary = InstrumentSegmenter().process(blob(cv::Scalar(100, 104, 123)), trocar);
+  auto const relaxed = InstrumentSegmenter(colourParams()).process(blob(cv::Scalar(90, 95, 126)), trocar);
+  auto const ordinary = InstrumentSegmenter(colourParams()).process(blob(cv::Scalar(100, 104, 123)), trocar);
   ASSERT_FALSE(relaxed.seeds.empty());
   EXPECT_GT(relaxed.seeds[0].mean_value, 40.f);
   EXPECT_EQ(relaxed.strip_searches, 0);
@@ -613,7 +616,7 @@ TEST(Segmentation, ARefusedSeedMissingForAFrameKeepsItsMemory) {
     return im;
   };
   cv::Mat const tissue(480, 640, CV_8UC3, cv::Scalar(60, 70, 170));
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   auto const first = seg.process(blob(70));
   ASSERT_FALSE(first.seeds.empty());
   EXPECT_GE(first.strip_searches, 1);
@@ -654,10 +657,10 @@ TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
     }
     return at;
   };
-  SegmentationParams every5;
+  SegmentationParams every5 = colourParams();
   every5.full_search_max_every = 5;
   EXPECT_EQ(searchedAt(every5, 40), (std::vector<int>{0, 5, 10, 15, 20, 25, 30, 35}));
-  SegmentationParams const backing_off;  // full_search_max_every 20
+  SegmentationParams const backing_off = colourParams();  // full_search_max_every 20
   EXPECT_EQ(searchedAt(backing_off, 40), (std::vector<int>{0, 5, 15, 35}));
   // Twice as long inward from frame 22 (its run along the border unchanged): searched at once, and
   // refused again, it backs off further.
@@ -673,7 +676,7 @@ TEST(Segmentation, ARefusedSeedIsSearchedInFullLessAndLessOften) {
 TEST(Segmentation, TheHardScenesShaftIsFoundWhereAnotherInstrumentsJawsTouchIt) {
   HardScene hard;
   double best = 1e9;
-  hard.throughPipeline(PipelineParams{}, 200, 283, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
+  hard.throughPipeline(colourPipelineParams(), 200, 283, [&](int k, std::vector<SyntheticView> const& views, PipelineOutput const& out) {
     if (k < 283) return;
     ApparentContour const& truth = views[1].truth;  // the right shaft
     EXPECT_GT(truth.entry_px.x(), 630.0);

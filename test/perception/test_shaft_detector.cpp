@@ -17,12 +17,14 @@
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 
+#include "colour_params.h"
 #include "contour_test_util.h"
 
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
 using endo_guidance::test::bandContour;
+using endo_guidance::test::colourParams;
 using endo_guidance::test::lineErrorOverItsExtent;
 
 namespace {
@@ -101,12 +103,16 @@ TEST(ShaftDetectorSeam, ADetectorFromOutsideTheCoreGoesThroughTheContourFit) {
   EXPECT_THROW(InstrumentSegmenter(sp, nullptr), std::invalid_argument);
 }
 
-// makeShaftDetector() makes the kind params.detector names, or says why it cannot.
+// makeShaftDetector() makes the kind params.detector names, or says why it cannot. The default
+// is the learned detector: it finds more of the shafts of surgeries neither method saw
+// (docs/accuracy.md).
 TEST(ShaftDetectorSeam, TheDetectorSwitchMakesEachKind) {
   SegmentationParams sp;
+  EXPECT_EQ(sp.detector, SegmentationParams::Detector::kLearned);
+  EXPECT_NE(dynamic_cast<LearnedShaftDetector*>(makeShaftDetector(sp).get()), nullptr);
+  sp.detector = SegmentationParams::Detector::kColour;
   EXPECT_NE(dynamic_cast<ColourShaftDetector*>(makeShaftDetector(sp).get()), nullptr);
   sp.detector = SegmentationParams::Detector::kLearned;
-  EXPECT_NE(dynamic_cast<LearnedShaftDetector*>(makeShaftDetector(sp).get()), nullptr);
   sp.learned.model = "/nonexistent/shaft_net.yaml";
   EXPECT_THROW(makeShaftDetector(sp), std::runtime_error);
 }
@@ -119,14 +125,14 @@ TEST(ShaftDetectorSeam, ACopyCarriesTheStreamsStateOver) {
   so.breathing_amplitude = 0.002;
   SyntheticScene scene(defaultInstruments(), so);
   SceneRenderer renderer(so.width, so.height, hardRenderOptions());
-  InstrumentSegmenter seg;
+  InstrumentSegmenter seg(colourParams());
   for (int k = 0; k < 30; ++k) seg.process(renderer.render(scene.frame(k), k));
   InstrumentSegmenter copy = seg;
   cv::Mat const next = renderer.render(scene.frame(30), 30);
   SegmentationResult const a = copy.process(next);
   for (int k = 31; k < 35; ++k) copy.process(renderer.render(scene.frame(k), k));  // (the original does not see these)
   SegmentationResult const b = seg.process(next);
-  SegmentationResult const fresh = InstrumentSegmenter().process(next);
+  SegmentationResult const fresh = InstrumentSegmenter(colourParams()).process(next);
   ASSERT_EQ(a.contours.size(), b.contours.size());
   for (std::size_t i = 0; i < a.contours.size(); ++i) EXPECT_EQ(a.contours[i].lines, b.contours[i].lines) << i;
   EXPECT_EQ(a.full_searches, b.full_searches);

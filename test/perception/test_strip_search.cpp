@@ -11,8 +11,11 @@
 #include "endo_guidance/perception/segmentation.h"
 #include "endo_guidance/perception/strip_search.h"
 
+#include "colour_params.h"
+
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
+using endo_guidance::test::colourParams;
 
 namespace {
 
@@ -226,7 +229,7 @@ LeakingShaft leakingShaft(std::uint64_t noise_seed, double crease) {
 // (and with the membrane along the border, the strip search found nothing).
 TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
   LeakingShaft const scene = leakingShaft(5, 0.0);
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.strip.enabled = false;
   sp.contours.min_parallel_side_ratio = 0.0;
   InstrumentSegmenter without(sp);
@@ -251,7 +254,7 @@ TEST(StripSearch, SegmentationFindsAShaftWhoseRegionLeaks) {
 // stays on it too.)
 TEST(StripSearch, AStripWhoseLinesLockedOntoACreaseIsRefinedAgainNarrower) {
   LeakingShaft const scene = leakingShaft(11, 6.5);
-  SegmentationParams sp;
+  SegmentationParams sp = colourParams();
   sp.contours.min_parallel_side_ratio = 0.0;  // (the strip search finds it)
   SegmentationParams no_retry = sp;
   no_retry.strip.retry_min_halfwidth_px = 0.0;

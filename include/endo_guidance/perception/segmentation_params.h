@@ -56,7 +56,7 @@ struct SegmentationParams {
   /// ([Doignon07] Sec. 3: seeds on the view's border, region growing, strip search) or the
   /// learned shaft mask (learned_shaft_detector.h). docs/accuracy.md compares them.
   enum class Detector { kColour, kLearned };
-  Detector detector = Detector::kColour;
+  Detector detector = Detector::kLearned;
   LearnedDetectorParams learned;
   ColourFeatureParams feature;
   FieldOfViewParams fov;
