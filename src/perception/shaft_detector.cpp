@@ -103,15 +103,14 @@ void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat co
       mask.map = *instrument;
     } else {  // the region: its own mask, or its polygon (a strip's quad) drawn over its box
       Region const& region = res.regions[res.contour_regions[i]];
-      cv::Rect const box = cv::boundingRect(region.boundary);
-      mask.origin = box.tl();
       if (!region.mask.empty() && region.mask.size() == region.box.size()) {
-        mask.map = region.mask;
-        mask.origin = region.box.tl();
-      } else {
-        mask.map = cv::Mat::zeros(box.size(), CV_8U);
+        mask = {region.mask, region.box.tl()};
+      } else if (cv::Rect const box = cv::boundingRect(region.boundary); !box.empty()) {
+        mask = {cv::Mat::zeros(box.size(), CV_8U), box.tl()};
         cv::drawContours(mask.map, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(255), cv::FILLED, cv::LINE_8,
                          cv::noArray(), INT_MAX, -box.tl());
+      } else {
+        continue;
       }
     }
     if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], mask, frame.fov.mask, frame.scale)) {

@@ -117,6 +117,7 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
                                                 std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
                                                 cv::Mat const& fov, int scale, double min_contrast) {
   CV_Assert(bgr.type() == CV_8UC3 && (instrument.map.type() == CV_32F || instrument.map.type() == CV_8U) && fov.type() == CV_8U);
+  if (instrument.map.empty()) return std::nullopt;
   geometry::ImageLine const ax = geometry::imageAxis(c);
   Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), to_tip = geometry::footOnLine(ax, c.tip_px) - e;
   if (!(to_tip.norm() > 1.0) || edges[0].empty() || edges[1].empty()) return std::nullopt;

@@ -11,6 +11,13 @@
 
 namespace endo_guidance::perception {
 
+/// A coarse instrument mask at the processing scale: a probability (CV_32F in [0, 1]) or a
+/// region (CV_8U, 255 on it) whose pixel (0, 0) is processing pixel `origin`; 0 outside it.
+struct InstrumentMask {
+  cv::Mat map;
+  cv::Point origin;
+};
+
 /// The tip (the jaws' end) of a fitted contour located on the full-resolution frame, from a
 /// coarse mask of the instrument (a network's at 160 x 128, or a region grown at half resolution):
 /// such a mask stops a few of its own pixels short of thin jaws, and joins the jaws of two
@@ -23,13 +30,6 @@ namespace endo_guidance::perception {
 /// contour fit's). nullopt, and the mask's tip stands, when no instrument colour differs from
 /// the tissue's by `min_contrast` levels or the instrument runs on past that reach.
 ///
-/// A coarse instrument mask at the processing scale: a probability (CV_32F in [0, 1]) or a
-/// region (CV_8U, 255 on it) whose pixel (0, 0) is processing pixel `origin`; 0 outside it.
-struct InstrumentMask {
-  cv::Mat map;
-  cv::Point origin;
-};
-
 /// `edges`: the contour's edge points per line (ContourFit::edges: the shaft's end is where the
 /// shorter line ends); `fov`: the field of view's mask at the processing scale, `scale`: processing
 /// to full resolution.
