@@ -137,6 +137,7 @@ def readers_seeds():
             with open(p, "rb") as f:
                 write("readers", name, bytes([5]) + f.read())
 
+
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--videos":
         video_seeds(sys.argv[2])

@@ -93,7 +93,7 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
   std::vector<Eigen::Vector3d> const goals{{0.12, -0.10, 0.13}, {-0.15, 0.08, 0.16}, {0.05, 0.15, 0.12}, {-0.05, -0.1, 0.14}};
   auto const info = ros::topic::waitForMessage<sensor_msgs::CameraInfo>("endoscope/camera_info", nh, ros::Duration(3.0));
   ASSERT_TRUE(info);
-  std::printf("[ servo ] target  settled(s)  tip err(mm)  axis err(deg)  overshoot(mm)\n");
+  std::printf("[ servo ] target  settled(s)  tip err(mm)  axis err(deg)  overshoot(mm)   (errors: the worst over 4 s held after settling)\n");
   for (std::size_t g = 0; g < goals.size(); ++g) {
     Eigen::Vector3d const& q = goals[g];
     Eigen::Vector3d const dir = (Eigen::AngleAxisd(q(0), Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(q(1), Eigen::Vector3d::UnitX())) *
@@ -119,11 +119,15 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
     // and the insertion depth within 2 mm (the depth goes through the trocar estimate and the
     // tip estimate along the shaft, each a few tenths of a mm).
     double const bound1 = pixel_mode ? 2.0 : 1.0, bound2 = pixel_mode ? 2.0 : 0.5;
-    // Score on the truth (tf of the simulated arm), every 40 ms for up to 25 s.
+    // Score on the truth (tf of the simulated arm), every 40 ms for up to 25 s, then 4 s more:
+    // once within bounds over 4 s (a breathing cycle), the target is held 4 s and scored there.
+    // (The first window within bounds begins just after the error last crossed them, so its worst
+    // is the approach's, just under the bound, not the held error.)
     std::vector<double> tip_err, ax_err;
     double overshoot = 0.0;
     Eigen::Vector3d u0 = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 625; ++k) {
+    std::size_t converged = 0;  // samples when first within bounds over 4 s
+    for (int k = 0; k < 725; ++k) {
       ros::WallDuration(0.04).sleep();
       Eigen::Isometry3d tip, ins, tro;
       try {
@@ -152,13 +156,15 @@ TEST(ServoSim, TargetsReachedSafelyAndStopsWhenTheInstrumentIsLost) {
         ax_err.push_back(std::acos(std::clamp((P - T).normalized().dot((P_star - T).normalized()), -1.0, 1.0)) * 180 / M_PI);
       }
       overshoot = std::max(overshoot, -(P - P_star).dot(u0) * 1e3);
-      // Converged: both within bounds over the last 4 s (a breathing cycle).
-      if (tip_err.size() >= 100 && *std::max_element(tip_err.end() - 100, tip_err.end()) < bound1 &&
+      // Converged: both within bounds over the last 4 s; then held for 4 s more.
+      if (converged == 0 && tip_err.size() >= 100 && *std::max_element(tip_err.end() - 100, tip_err.end()) < bound1 &&
           *std::max_element(ax_err.end() - 100, ax_err.end()) < bound2)
-        break;
+        converged = tip_err.size();
+      if (converged > 0 && tip_err.size() >= converged + 100) break;
     }
     ASSERT_GE(tip_err.size(), 100u);
-    double const fin_tip = *std::max_element(tip_err.end() - 100, tip_err.end());
+    EXPECT_GT(converged, 0u) << "target " << g << " not within bounds over 4 s in 25 s";
+    double const fin_tip = *std::max_element(tip_err.end() - 100, tip_err.end());  // the held 4 s (else the last 4 s)
     double const fin_ax = *std::max_element(ax_err.end() - 100, ax_err.end());
     double settled = 0.0;
     for (std::size_t i = tip_err.size(); i-- > 0;)
