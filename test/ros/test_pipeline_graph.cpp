@@ -413,21 +413,22 @@ double setParameter(std::string const& node, std::string const& name, double val
 }
 }  // namespace
 
-// Runtime tuning: a seed threshold of 0 finds no shaft; restored, the shafts come back.
+// Runtime tuning: a minimum shaft length longer than the view finds no shaft (the contour fit
+// checks it, whichever detector proposes); restored, the shafts come back.
 TEST_F(Graph, DynamicReconfigureChangesTheSegmentation) {
   SyntheticScene scene(defaultInstruments(), so_);
   SceneRenderer renderer(so_.width, so_.height);
   cv::Mat const good = renderer.render(scene.frame(30), 30);
-  auto set = [](int threshold) {
-    return setParameter("endoscope/segmentation", "seed_threshold", threshold, &dynamic_reconfigure::Config::ints) == threshold;
+  auto set = [](double length) {
+    return setParameter("endoscope/segmentation", "min_length_px", length, &dynamic_reconfigure::Config::doubles) == length;
   };
   ASSERT_TRUE(ros::service::waitForService("endoscope/segmentation/set_parameters", 5000));
   ASSERT_TRUE(publish(good, ros::Time(2000.0)));
   ASSERT_GE(contours_.get()->contours.size(), 1u);
-  ASSERT_TRUE(set(0));
+  ASSERT_TRUE(set(2000.0));
   ASSERT_TRUE(publish(good, ros::Time(2000.04)));
   EXPECT_EQ(contours_.get()->contours.size(), 0u);
-  ASSERT_TRUE(set(40));
+  ASSERT_TRUE(set(30.0));
   ASSERT_TRUE(publish(good, ros::Time(2000.08)));
   EXPECT_GE(contours_.get()->contours.size(), 1u);
 }
