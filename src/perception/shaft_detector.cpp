@@ -2,7 +2,6 @@
 #include "endo_guidance/perception/shaft_detector.h"
 
 #include <algorithm>
-#include <climits>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -107,8 +106,7 @@ void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat co
         mask = {region.mask, region.box.tl()};
       } else if (cv::Rect const box = cv::boundingRect(region.boundary); !box.empty()) {
         mask = {cv::Mat::zeros(box.size(), CV_8U), box.tl()};
-        cv::drawContours(mask.map, std::vector<std::vector<cv::Point>>{region.boundary}, 0, cv::Scalar(255), cv::FILLED, cv::LINE_8,
-                         cv::noArray(), INT_MAX, -box.tl());
+        cv::fillPoly(mask.map, std::vector<std::vector<cv::Point>>{region.boundary}, cv::Scalar(255), cv::LINE_8, 0, -box.tl());
       } else {
         continue;
       }

@@ -84,11 +84,12 @@ std::optional<std::vector<std::uint32_t>> chunkRecords(Bytes const& b) {
   return starts;
 }
 
-// A chunk's data uncompressed to exactly `size` bytes; "" or why not.
-std::string uncompress(std::string const& compression, Bytes const& data, std::uint32_t size, Bytes* out) {
+// A chunk's data uncompressed to exactly `size` bytes into `out` (an uncompressed chunk's is
+// swapped in, not copied); "" or why not.
+std::string uncompress(std::string const& compression, Bytes& data, std::uint32_t size, Bytes* out) {
   if (compression == "none") {
     if (size != data.size()) return "an uncompressed chunk's size is not its data's";
-    *out = data;
+    out->swap(data);
     return "";
   }
   if (compression != "bz2" && compression != "lz4") return "unknown chunk compression '" + compression + "'";
@@ -136,7 +137,7 @@ std::string bagStructureError(std::string const& path) {
     long const at = pos + 8 + static_cast<long>(hl);
     if (dl > static_cast<std::uint64_t>(size - at)) return "a record's data runs past the end of the file";
     int const op = opOf(*fields);
-    if (op == 0x03 || op == 0x04 || op == 0x05 || op == 0x06) {
+    if (op == 0x04 || op == 0x05 || op == 0x06) {  // (the bag header's data is padding)
       data.resize(dl);
       if (std::fread(data.data(), 1, dl, f) != dl) return "truncated record data";
     }

@@ -18,6 +18,8 @@
 #include "endo_guidance/sim/scene_renderer.h"
 #include "endo_guidance/sim/synthetic_scene.h"
 
+#include "colour_params.h"
+
 using namespace endo_guidance::perception;
 using namespace endo_guidance::geometry;
 using namespace endo_guidance::sim;
@@ -77,9 +79,7 @@ TEST(LearnedShaftDetector, MissingOrCorruptModelIsAClearErrorAtConstruction) {
   sp.detector = SegmentationParams::Detector::kLearned;
   sp.learned.model = "/nonexistent/shaft_net.yaml";
   EXPECT_THROW(InstrumentSegmenter{sp}, std::runtime_error);
-  SegmentationParams colour;
-  colour.detector = SegmentationParams::Detector::kColour;
-  InstrumentSegmenter seg(colour);
+  InstrumentSegmenter seg(endo_guidance::test::colourParams());
   EXPECT_THROW(seg.setParams(sp), std::runtime_error);
   EXPECT_EQ(seg.params().detector, SegmentationParams::Detector::kColour);
 }
