@@ -48,7 +48,7 @@ ServoSupervisor::ServoSupervisor(SupervisorParams const& p, ServoParams const& s
     : params_(p), servo_(servo), rotation_(rotation) {}
 
 ServoDecision ServoSupervisor::setEnabled(bool on) {
-  if (on && !enabled_) last_tip_.reset(), last_stamp_.reset();
+  if (on && !enabled_) last_tip_.reset(), last_stamp_.reset(), gap_reported_ = false;
   enabled_ = on;
   ServoDecision d;
   if (!on) {
@@ -78,8 +78,15 @@ ServoDecision ServoSupervisor::stop(std::string reason) {
 }
 
 ServoDecision ServoSupervisor::watchdog(double steady_now, double ros_now, double joints_arrival) {
-  if (!enabled_ || !moving_) return {};
-  if (steady_now - last_arrival_ > maxGap()) return stop(fmt("no camera measurement for %.3f s", steady_now - last_arrival_));
+  if (!enabled_) return {};
+  // A camera gap is reported once per gap even when an earlier stop holds the arm: the stale
+  // reason (a jump, a lost instrument) would hide that no frames are coming.
+  if (steady_now - last_arrival_ > maxGap() && !gap_reported_) {
+    gap_reported_ = true;
+    return stop(last_arrival_ < -1e299 ? std::string("no camera measurement yet")
+                                       : fmt("no camera measurement for %.3f s", steady_now - last_arrival_));
+  }
+  if (!moving_) return {};
   if (ros_now - command_stamp_ > params_.max_age) return stop(fmt("command's measurement %.3f s old", ros_now - command_stamp_));
   if (!(steady_now - joints_arrival <= params_.joint_timeout))
     return stop(fmt("joint states stale (%.3f s without)", steady_now - joints_arrival));
@@ -89,6 +96,7 @@ ServoDecision ServoSupervisor::watchdog(double steady_now, double ros_now, doubl
 ServoDecision ServoSupervisor::step(ServoFrame const& f, RobotSample const& r, double steady_now, double ros_now,
                                     std::optional<Eigen::Matrix3d> const& K) {
   last_arrival_ = steady_now;
+  gap_reported_ = false;
   if (!enabled_) return {};
   if (instrument_ < 0) return stop("no instrument chosen (target.insertion_point_id)");
   // Time: the measurement's own stamp, by the ROS clock (a late or replayed frame is refused).

@@ -277,6 +277,31 @@ TEST(ServoSupervisor, TheBareLawViolatesTheProperties) {
   EXPECT_GT(out.violations["P4 command outlives its data (joints)"], 0);
 }
 
+// A camera that stalls after another stop must still be reported: the diagnostics show the
+// last stop's reason, and a stale "instrument lost" would hide that no frames come at all.
+TEST(ServoSupervisor, ReportsACameraGapOnceEvenWhenAlreadyStopped) {
+  ServoSupervisor s(limitsForTest());
+  s.setEnabled(true);
+  s.setInstrument(0);
+  ServoDecision d = s.watchdog(1.0, 1.0, 1.0);
+  EXPECT_EQ(d.reason, "no camera measurement yet");
+  EXPECT_TRUE(d.publish_state);
+  EXPECT_FALSE(d.send);  // the arm was never driven: no command
+  EXPECT_TRUE(s.watchdog(1.01, 1.01, 1.01).reason.empty()) << "reported once per gap";
+  d = s.step(ServoFrame{}, RobotSample{}, 2.0, 2.0);  // a frame without the instrument
+  EXPECT_EQ(d.reason.rfind("instrument lost", 0), 0u) << d.reason;
+  EXPECT_TRUE(s.watchdog(2.0 + 0.5 * s.maxGap(), 2.05, 2.05).reason.empty()) << "within the gap allowed";
+  d = s.watchdog(2.2, 2.2, 2.2);
+  EXPECT_EQ(d.reason.rfind("no camera measurement for 0.200 s", 0), 0u) << d.reason;
+  EXPECT_TRUE(d.publish_state);
+  EXPECT_FALSE(d.send);
+  EXPECT_TRUE(s.watchdog(2.3, 2.3, 2.3).reason.empty());
+  s.step(ServoFrame{}, RobotSample{}, 3.0, 3.0);  // frames again, then a new gap: reported again
+  EXPECT_FALSE(s.watchdog(3.2, 3.2, 3.2).reason.empty());
+  s.setEnabled(false);
+  EXPECT_TRUE(s.watchdog(5.0, 5.0, 5.0).reason.empty()) << "a disabled servo reports nothing";
+}
+
 TEST(ServoSupervisor, ResolvesPixelTargetsOnTheRayAtTheDepth) {
   Eigen::Matrix3d K;
   K << 500, 0, 320, 0, 500, 240, 0, 0, 1;

@@ -93,7 +93,8 @@ class ServoSupervisor {
                      std::optional<Eigen::Matrix3d> const& K = std::nullopt);
   /// Between measurements (call at a fixed rate): stops a moving arm when no measurement arrived
   /// for maxGap(), the one its command came from is older than max_age by the ROS clock, or the
-  /// joint states last arrived (steady clock) longer than joint_timeout ago.
+  /// joint states last arrived (steady clock) longer than joint_timeout ago. While engaged, a
+  /// camera gap is reported (publish_state) once per gap even if the arm is already stopped.
   ServoDecision watchdog(double steady_now, double ros_now, double joints_arrival);
   /// s: the longest gap between measurements a command may outlive: two control periods (one
   /// frame lost), at most max_age.
@@ -114,6 +115,7 @@ class ServoSupervisor {
   TrocarServo servo_;
   CameraBaseRotation rotation_;
   bool enabled_ = false, moving_ = false, estimate_rotation_ = true;
+  bool gap_reported_ = false;  // this camera gap's stop was reported (reset by a measurement)
   int instrument_ = -1;
   std::optional<TargetRequest> pending_;
   double roll_rate_ = 0.0;
