@@ -282,27 +282,80 @@ ContourLinesParams widePass(ContourLinesParams const& p) {
 
 namespace {
 
-// The robust line through sub-pixel edge points (Tukey biweight, scale from the MAD, three
-// passes), oriented like `line` (shaft on the positive side), with its covariance.
+// The robust line through sub-pixel edge points, oriented like `line` (shaft on the positive
+// side), with its covariance: Tukey biweight (scale from the MAD, three passes) from a
+// least-squares start. A few points beyond one end of the others (a jaw past a gap) tilt that
+// start by their leverage, and the biweight then keeps them; so it is also run from the LMedS
+// line ([Rousseeuw87]), and that fit is kept when all it leaves out lies beyond one end of what
+// it keeps and its biweight loss is the lower at the smaller of the two fits' scales.
 std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pts, geometry::ImageLine const& line, ContourLinesParams const& p) {
   Eigen::Vector2d const n = line.head<2>();
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
-  // Robust LS: Tukey biweight, scale from the MAD, three passes.
-  std::vector<double> w(pts.size(), 1.0), r(pts.size()), rr(pts.size());
-  Eigen::Vector3d l = line;
-  for (int it = 0; it < 3; ++it) {
-    auto const f = fitLineLS(pts, &w);
-    if (!f) return std::nullopt;
-    l = *f;
+  struct Fit {
+    Eigen::Vector3d l;
+    std::vector<double> w;
+    double scale;
+  };
+  std::vector<double> r(pts.size()), rr(pts.size());
+  auto residuals = [&](Eigen::Vector3d const& l) {
     for (std::size_t i = 0; i < pts.size(); ++i) r[i] = std::abs(l.head<2>().dot(pts[i]) + l.z());
+  };
+  auto reweight = [&](Fit& f) {
+    residuals(f.l);
     std::copy(r.begin(), r.end(), rr.begin());
     std::nth_element(rr.begin(), rr.begin() + rr.size() / 2, rr.end());
-    double const sc = std::max(1.4826 * rr[rr.size() / 2], 0.05);
+    f.scale = std::max(1.4826 * rr[rr.size() / 2], 0.05);
     for (std::size_t i = 0; i < pts.size(); ++i) {
-      double const u = r[i] / (4.685 * sc);
-      w[i] = u < 1.0 ? (1 - u * u) * (1 - u * u) : 0.0;
+      double const u = r[i] / (4.685 * f.scale);
+      f.w[i] = u < 1.0 ? (1 - u * u) * (1 - u * u) : 0.0;
+    }
+  };
+  auto biweight = [&](Fit f, int passes) -> std::optional<Fit> {
+    for (int it = 0; it < passes; ++it) {
+      auto const l = fitLineLS(pts, &f.w);
+      if (!l) return std::nullopt;
+      f.l = *l;
+      reweight(f);
+    }
+    return f;
+  };
+  // Tukey's biweight rho at scale s, summed: the loss the reweighting descends.
+  auto loss = [&](Eigen::Vector3d const& l, double s) {
+    residuals(l);
+    double sum = 0.0;
+    for (double const e : r) {
+      double const u = std::min(e / (4.685 * s), 1.0), v = 1.0 - u * u;
+      sum += 1.0 - v * v * v;
+    }
+    return sum;
+  };
+  // Only points beyond one end of the others have leverage on the least-squares start (and a
+  // fit that leaves out points inside its own span is a shorter, straighter piece of a crooked
+  // edge, such as a tissue fold's): the run left out lies past one end, and enough remain.
+  auto const leverageOnly = [&](Fit const& f) {
+    Eigen::Vector2d const d(-f.l.y(), f.l.x());
+    double kept_lo = std::numeric_limits<double>::infinity(), kept_hi = -kept_lo, out_lo = kept_lo, out_hi = kept_hi;
+    int kept = 0;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      double const t = d.dot(pts[i]);
+      if (f.w[i] > 0.0) ++kept, kept_lo = std::min(kept_lo, t), kept_hi = std::max(kept_hi, t);
+      else out_lo = std::min(out_lo, t), out_hi = std::max(out_hi, t);
+    }
+    return kept >= p.min_edge_points && out_lo <= out_hi && (out_lo > kept_hi || out_hi < kept_lo);
+  };
+  auto best = biweight(Fit{line, std::vector<double>(pts.size(), 1.0), 0.0}, 3);  // (the first pass unweighted)
+  if (!best) return std::nullopt;
+  if (auto const start = fitLineLMedS(pts, p.lmeds_samples, p.seed + pts.size())) {
+    Fit f{start->line, std::vector<double>(pts.size()), 0.0};
+    reweight(f);
+    auto const g = biweight(std::move(f), 3);
+    if (g && leverageOnly(*g)) {
+      double const sc = std::min(g->scale, best->scale);
+      if (loss(g->l, sc) < loss(best->l, sc)) best = g;
     }
   }
+  Eigen::Vector3d l = best->l;
+  std::vector<double> const& w = best->w;
   if (l.head<2>().dot(n) < 0.0) l = -l;  // keep the shaft on the positive side
   return summarizeLine(l, pts, w, p.min_edge_points, p.line_sigma_floor_px);
 }
