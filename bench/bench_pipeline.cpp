@@ -23,6 +23,7 @@
 #include "endo_guidance/perception/strip_search.h"
 #include "endo_guidance/pipeline/pipeline.h"
 #include "endo_guidance/sim/scene_renderer.h"
+#include "colour_params.h"
 #include "hough_baseline.h"
 #include "ratio_reporter.h"
 
@@ -65,13 +66,8 @@ Frames const& frames(int w, int h) {
 
 int const kSizes[3][2] = {{640, 480}, {720, 576}, {1920, 1080}};
 
-// The colour method's pipeline: the rows the docs give as the colour method's name it, since the
-// default detector is the learned one (learnedParams() below).
-PipelineParams colourParams() {
-  PipelineParams pp;
-  pp.segmentation.detector = SegmentationParams::Detector::kColour;
-  return pp;
-}
+// The rows the docs give as the colour method's name it (the default detector is the learned one).
+using endo_guidance::test::colourPipelineParams;
 
 void BM_HSV(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
@@ -85,7 +81,7 @@ void BM_HSV(benchmark::State& st) {
 
 void BM_Pipeline(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
-  Pipeline p(f.K, f.images[0].size(), colourParams());
+  Pipeline p(f.K, f.images[0].size(), colourPipelineParams());
   for (auto const& im : f.images) p.process(im);  // warm: insertion points, levels
   std::size_t i = 0;
   for (auto _ : st) {
@@ -138,7 +134,7 @@ void pipelinePairedWithHSV(benchmark::State& st, PipelineParams const& params) {
   pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(p.process(im)); });
 }
 
-void BM_PipelinePairedWithHSV(benchmark::State& st) { pipelinePairedWithHSV(st, colourParams()); }
+void BM_PipelinePairedWithHSV(benchmark::State& st) { pipelinePairedWithHSV(st, colourPipelineParams()); }
 
 // The plain OpenCV baseline (Canny + Hough on chroma; src/tools/hough_baseline.h), for
 // comparison: it finds shafts only, no pose or insertion points.
@@ -150,7 +146,7 @@ void BM_HoughBaselinePairedWithHSV(benchmark::State& st) {
 // The same with contour tracking between detection frames (detect_every 4: a speed mode, not the
 // default; see contour_tracking.h).
 void BM_PipelineTrackingPairedWithHSV(benchmark::State& st) {
-  PipelineParams p = colourParams();
+  PipelineParams p = colourPipelineParams();
   p.segmentation.tracking.detect_every = 4;
   pipelinePairedWithHSV(st, p);
 }
@@ -182,7 +178,7 @@ void BM_Stage_SigmaFilter(benchmark::State& st) {
 
 void BM_Stage_Segmentation(benchmark::State& st) {
   auto const& f = frames(static_cast<int>(st.range(0)), static_cast<int>(st.range(1)));
-  InstrumentSegmenter seg(colourParams().segmentation);
+  InstrumentSegmenter seg(colourPipelineParams().segmentation);
   for (auto const& im : f.images) seg.process(im);
   std::size_t i = 0;
   for (auto _ : st) benchmark::DoNotOptimize(seg.process(f.images[i++ % f.images.size()]));
@@ -263,7 +259,7 @@ void BM_RealVideoPairedWithHSV(benchmark::State& st) {
     st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_robotic").string()).c_str());
     return;
   }
-  Pipeline p(f.K, f.images[0].size(), colourParams());
+  Pipeline p(f.K, f.images[0].size(), colourPipelineParams());
   double strips = 0.0, full = 0.0, shafts = 0.0, calls = 0.0;
   pairedWithHSV(st, f, [&](cv::Mat const& im) {
     auto const out = p.process(im);
@@ -286,7 +282,7 @@ void BM_RealStillsSegmentationPairedWithHSV(benchmark::State& st) {
     st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_rigid_invivo").string()).c_str());
     return;
   }
-  InstrumentSegmenter seg(colourParams().segmentation);
+  InstrumentSegmenter seg(colourPipelineParams().segmentation);
   double strips = 0.0, calls = 0.0;
   pairedWithHSV(st, f, [&](cv::Mat const& im) {
     seg.reset();
