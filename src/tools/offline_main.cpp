@@ -123,7 +123,8 @@ std::string frameJson(long k, tools::Frame const& f, PipelineOutput const& out) 
     j << (i ? ", " : "") << "{\"track\": " << o.track << ", \"insertion_point\": " << o.insertion_point
       << ", \"contours\": [" << vec(o.contour.lines[0]) << ", " << vec(o.contour.lines[1]) << "]"
       << ", \"direction\": " << vec(o.pose.axis.direction()) << ", \"moment\": " << vec(o.pose.axis.moment())
-      << ", \"residual_px\": " << num(o.contour.residual_px) << ", \"tip_px\": " << vec(o.contour.tip_px)
+      << ", \"residual_px\": " << num(o.contour.residual_px) << ", \"entry_px\": " << vec(o.contour.entry_px)
+      << ", \"tip_px\": " << vec(o.contour.tip_px)
       << ", \"through_insertion_point\": ";
     if (o.constrained)
       j << "{\"direction\": " << vec(o.constrained->pose.axis.direction()) << ", \"moment\": " << vec(o.constrained->pose.axis.moment())

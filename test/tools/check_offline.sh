@@ -63,6 +63,10 @@ for r in good:
         assert abs(math.hypot(*i["direction"]) - 1) < 1e-6
         for l in i["contours"]:
             assert abs(math.hypot(l[0], l[1]) - 1) < 1e-6
+        # entry and tip on the image axis: as far from one line as from the other, apart along it
+        d = [[abs(l[0] * p[0] + l[1] * p[1] + l[2]) for l in i["contours"]] for p in (i["entry_px"], i["tip_px"])]
+        assert all(abs(a - b) < 0.01 for a, b in d), (d, i)
+        assert math.dist(i["entry_px"], i["tip_px"]) > 10, i
 # The axis through its insertion point: for a shaft attached to a located one (null otherwise),
 # a unit direction within a few degrees of the measured one, passing within mm of the point.
 through = 0
