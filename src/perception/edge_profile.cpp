@@ -288,7 +288,9 @@ namespace {
 // start by their leverage, and the biweight then keeps them; so it is also run from the LMedS
 // line ([Rousseeuw87]), and that fit is kept when all it leaves out lies beyond one end of what
 // it keeps and its biweight loss is the lower at the smaller of the two fits' scales.
-std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pts, geometry::ImageLine const& line, ContourLinesParams const& p) {
+// `lmeds_start` false: the least-squares start only (a line that only steers a search).
+std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pts, geometry::ImageLine const& line, ContourLinesParams const& p,
+                                          bool lmeds_start = true) {
   Eigen::Vector2d const n = line.head<2>();
   if (static_cast<int>(pts.size()) < p.min_edge_points) return std::nullopt;
   struct Fit {
@@ -345,7 +347,7 @@ std::optional<RefinedLine> robustEdgeLine(std::vector<Eigen::Vector2d> const& pt
   };
   auto best = biweight(Fit{line, std::vector<double>(pts.size(), 1.0), 0.0}, 3);  // (the first pass unweighted)
   if (!best) return std::nullopt;
-  if (auto const start = fitLineLMedS(pts, p.lmeds_samples, p.seed + pts.size())) {
+  if (auto const start = lmeds_start ? fitLineLMedS(pts, p.lmeds_samples, p.seed + pts.size()) : std::nullopt) {
     Fit f{start->line, std::vector<double>(pts.size()), 0.0};
     reweight(f);
     auto const g = biweight(std::move(f), 3);
@@ -427,9 +429,10 @@ std::optional<RefinedLine> extendLineSubpixel(cv::Mat const& bgr, RefinedLine co
         after_gap = false;
         for (auto const& e : pending) {
           pts.push_back(e);
-          // Follow the line as it gets longer (its direction improves with the baseline).
+          // Follow the line as it gets longer (its direction improves with the baseline); it only
+          // steers the gate, and the final fit below has both starts.
           if (++added % 16 == 0)
-            if (auto const f = robustEdgeLine(pts, l, p)) l = f->line;
+            if (auto const f = robustEdgeLine(pts, l, p, false)) l = f->line;
         }
         pending.clear();
       } else {
