@@ -81,7 +81,7 @@ PY
       echo "== $m"; score "$m" OP1,OP2,OP3 | grep -E "^  all:"
     done
     cmp -s models/shaft_net.onnx "$OUT/check/shaft_net.onnx" && echo "(the same model, byte for byte)" ||
-      echo "(not the same bytes, as on another kind of CPU: the two should agree within the training's spread, about three shafts per site and 0.15 false per image; docs/accuracy.md)"
+      echo "(not the same bytes, as expected on another kind of CPU than the one it was trained on: the two should agree within the training's spread, about three shafts per site and 0.15 false per image; docs/accuracy.md)"
     ;;
   --reference)
     rm -rf "$OUT/reference" "$OUT/reference_model"
