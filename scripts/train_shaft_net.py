@@ -333,8 +333,9 @@ def main():
             step += 1
             total += float(loss)
         if epoch % 10 == 9 or epoch == args.epochs - 1:
-            print("epoch %3d  loss %.4f  held-out shaft IoU %.3f  (%.0f s)" %
-                  (epoch + 1, total / (per_epoch // batch), iou(model, held), time.time() - t0), flush=True)
+            held_report = "  held-out shaft IoU %.3f" % iou(model, held) if held else ""
+            print("epoch %3d  loss %.4f%s  (%.0f s)" %
+                  (epoch + 1, total / (per_epoch // batch), held_report, time.time() - t0), flush=True)
     held_iou = iou(model, held)
     os.makedirs(args.out, exist_ok=True)
     onnx_path = os.path.join(args.out, "shaft_net.onnx")
@@ -364,9 +365,9 @@ def main():
         for c, name in enumerate(CLASSES):
             fs.write(name, out[c].astype(np.float32))
         fs.release()
-    print("trained in %.0f s on %d threads; held-out (%s) shaft IoU %.3f; model %s (%d bytes)" %
-          (time.time() - t0, torch.get_num_threads(), args.hold_out or "none", held_iou, onnx_path,
-           os.path.getsize(onnx_path)), flush=True)
+    held_report = "held-out (%s) shaft IoU %.3f" % (args.hold_out, held_iou) if held else "no site held out"
+    print("trained in %.0f s on %d threads; %s; model %s (%d bytes)" %
+          (time.time() - t0, torch.get_num_threads(), held_report, onnx_path, os.path.getsize(onnx_path)), flush=True)
 
 
 if __name__ == "__main__":

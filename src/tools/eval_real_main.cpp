@@ -142,6 +142,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   std::map<std::string, StrictScore> strict;  // per operation
   std::map<std::string, int> strict_images;
   std::map<std::string, int> covered;  // per operation: mask shafts the network covers (learned detector)
+  std::map<std::string, int> covered_instrument;  // ... as shaft or jaws: a miss of the instrument, or of its class
   std::map<std::string, int> line_findable;  // per operation (--annotated-mask): found by a line fitted to each side
   std::vector<fs::path> files;
   for (std::string const& op : sites) {
@@ -157,6 +158,9 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
     oracle = d.get();
     return InstrumentSegmenter(sp, std::move(d));
   }();
+  // The learned detector's network once more, for its instrument mask (a diagnostic only).
+  std::unique_ptr<ShaftNet> net;
+  if (sp.detector == SegmentationParams::Detector::kLearned && !annotated_mask) net = std::make_unique<ShaftNet>(sp.learned.model);
   for (auto const& f : files) {
     cv::Mat const im = cv::imread(f.string(), cv::IMREAD_COLOR);
     std::string name = f.filename().string();
@@ -210,11 +214,19 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       strict[op] += sc;
       // The learned detector: the mask shafts its network covers (half of their pixels at
       // p >= 1/2), found or not -- what the network gives the contour fit.
-      if (sp.detector == SegmentationParams::Detector::kLearned) {
-        cv::Mat shaft_like;
+      std::vector<std::pair<double, double>> cover;  // per mask shaft (ms): its fraction the network covers, as shaft / instrument
+      if (net) {
+        cv::Mat shaft_like, instrument, instrument_like;
         cv::resize(seg.feature() < 128, shaft_like, im.size(), 0, 0, cv::INTER_NEAREST);
+        cv::resize(net->probabilities(im).instrument, instrument, seg.fieldOfView().mask.size(), 0, 0, cv::INTER_LINEAR);
+        cv::resize(instrument >= 0.5, instrument_like, im.size(), 0, 0, cv::INTER_NEAREST);
         for (auto const& [id, m] : shafts)
-          if (cv::countNonZero(m) >= kStrictMinPx) covered[op] += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
+          if (cv::countNonZero(m) >= kStrictMinPx) {
+            double const n = cv::countNonZero(m);
+            cover.emplace_back(cv::countNonZero(m & shaft_like) / n, cv::countNonZero(m & instrument_like) / n);
+            covered[op] += cover.back().first >= 0.5;
+            covered_instrument[op] += cover.back().second >= 0.5;
+          }
       }
       // The scoring's own ceiling: each side's total least-squares line as the detection's.
       if (oracle)
@@ -231,8 +243,11 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
           if (sc.match[i] < 0) {
             double best = std::numeric_limits<double>::infinity();
             for (auto const& c : r.contours) best = std::min(best, endo_guidance::tools::findCost(ms[i], c));
-            std::printf("  strict miss %s/%s: a shaft of %d px (sides of %zu and %zu px), the nearest detection's larger side median %.1f px\n",
+            std::printf("  strict miss %s/%s: a shaft of %d px (sides of %zu and %zu px), the nearest detection's larger side median %.1f px",
                         op.c_str(), base.c_str(), ms[i].pixels, ms[i].sides[0].size(), ms[i].sides[1].size(), best);
+            if (i < cover.size())
+              std::printf("; the network covers %.0f %% of it as shaft, %.0f %% as shaft or jaws", 100.0 * cover[i].first, 100.0 * cover[i].second);
+            std::printf("\n");
           }
       if (verbose)  // each false detection, with what the annotation has under its strip
         for (std::size_t d = 0; d < r.contours.size(); ++d) {
@@ -398,8 +413,9 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   int all_images = 0;
   for (auto const& [op, sc] : strict) {
     printStrict(op.c_str(), sc, strict_images[op], "image");
-    if (sp.detector == SegmentationParams::Detector::kLearned && !annotated_mask)
-      std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2)\n", op.c_str(), covered[op], sc.shafts);
+    if (net)
+      std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2), %d as shaft or jaws\n", op.c_str(),
+                  covered[op], sc.shafts, covered_instrument[op]);
     if (oracle)
       std::printf("  %s: %d of the %d shafts are found by a total least-squares line on each of their sides (the scoring's ceiling)\n",
                   op.c_str(), line_findable[op], sc.shafts);
