@@ -497,9 +497,9 @@ void reportToolTrocars(std::map<int, std::vector<PluckerLine>> const& tool_axes,
   }
 }
 
-// Robotic masks: each frame's pixels snapped to 0 / 70 / 160; one mask shaft per connected
-// component of class 160 with kStrictRoboticMinPx, scored strictly against the detections.
-StrictScore scoreRoboticMasks(std::vector<cv::Mat> const& masks, std::vector<ApparentContour> const& detections) {
+// The robotic mask videos' shafts: each frame's pixels snapped to 0 / 70 / 160, one mask shaft
+// per connected component of class 160 with kStrictRoboticMinPx (`components`: their masks).
+std::vector<MaskShaft> roboticMaskShafts(std::vector<cv::Mat> const& masks, std::vector<cv::Mat>* components = nullptr) {
   cv::Mat shaft, jaws;
   for (cv::Mat const& m : masks) {
     cv::Mat g;
@@ -512,8 +512,12 @@ StrictScore scoreRoboticMasks(std::vector<cv::Mat> const& masks, std::vector<App
   int const n = cv::connectedComponentsWithStats(shaft, labels, stats, centroids, 8, CV_32S);
   std::vector<MaskShaft> ms;
   for (int k = 1; k < n; ++k)
-    if (stats.at<int>(k, cv::CC_STAT_AREA) >= kStrictRoboticMinPx) ms.push_back(maskShaft(labels == k, jaws));
-  return scoreStrict(ms, detections);
+    if (stats.at<int>(k, cv::CC_STAT_AREA) >= kStrictRoboticMinPx) {
+      cv::Mat const c = labels == k;
+      ms.push_back(maskShaft(c, jaws));
+      if (components) components->push_back(c);
+    }
+  return ms;
 }
 
 // Annotated axes found: a detection's image axis (bisector of its lines) within kAxisFoundPx of
@@ -587,6 +591,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
       if (e.path().filename().string().find("Segmentation.avi") != std::string::npos) mask_caps.emplace_back(e.path().string());
     StrictScore strict;
     int axes_found40 = 0;
+    int covered = 0, covered_instrument = 0;  // mask shafts the network covers, as shaft / as shaft or jaws (learned detector)
+    std::unique_ptr<ShaftNet> net;
+    if (sp.detector == SegmentationParams::Detector::kLearned) net = std::make_unique<ShaftNet>(sp.learned.model);
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
@@ -623,7 +630,20 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             std::printf("  false ds%d frame %d (%s): entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
                         c.entry_px.x(), c.entry_px.y(), c.tip_px.x(), c.tip_px.y());
         }
-        if (masks_ok) strict += scoreRoboticMasks(mask_frames, r.contours);
+        if (masks_ok) {
+          std::vector<cv::Mat> components;
+          strict += scoreStrict(roboticMaskShafts(mask_frames, net ? &components : nullptr), r.contours);
+          if (net) {  // the network's cover of each: its masks at p >= 1/2 brought to the frame's size
+            ShaftProbabilities const p = net->probabilities(im);
+            cv::Mat shaft_like, instrument_like;
+            cv::resize(p.shaft >= 0.5, shaft_like, im.size(), 0, 0, cv::INTER_NEAREST);
+            cv::resize(p.instrument >= 0.5, instrument_like, im.size(), 0, 0, cv::INTER_NEAREST);
+            for (cv::Mat const& m : components) {
+              covered += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
+              covered_instrument += cv::countNonZero(m & instrument_like) * 2 >= cv::countNonZero(m);
+            }
+          }
+        }
         axes_found40 += axesFound(it->second, r.contours);
         for (auto const& a : it->second) {
           ++n;
@@ -680,6 +700,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::printf("  strict: annotated axes found (a detection's image axis within %.0f px of both annotated points) %d / %d = %.1f %%\n",
                 kAxisFoundPx, axes_found40, n, 100.0 * axes_found40 / std::max(1, n));
     if (!mask_caps.empty()) printStrict("strict, mask shafts (components of >= 500 px)", strict, frames_annot, "frame");
+    if (!mask_caps.empty() && net)
+      std::printf("  the network covers %d of the %d mask shafts (half of their pixels at p >= 1/2), %d as shaft or jaws\n", covered,
+                  strict.shafts, covered_instrument);
     double const found_frac = static_cast<double>(found) / std::max(1, n);
     double const false_rate = static_cast<double>(false_dets) / std::max(1, frames_annot);
     if ((min_found >= 0.0 && found_frac < min_found) || (max_false_per_frame >= 0.0 && false_rate > max_false_per_frame)) {
