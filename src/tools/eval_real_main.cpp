@@ -135,6 +135,15 @@ void printStrict(char const* what, StrictScore const& s, int frames, char const*
               percentile(s.side_median_px, 0.9));
 }
 
+// A network probability's mask at p >= 1/2 as the learned detector sees it (resized bilinearly to
+// the processing size), brought to the frame's size: what the network covers.
+cv::Mat networkMask(cv::Mat const& probability, cv::Size processing, cv::Size frame) {
+  cv::Mat at_processing, mask;
+  cv::resize(probability, at_processing, processing, 0, 0, cv::INTER_LINEAR);
+  cv::resize(at_processing >= 0.5, mask, frame, 0, 0, cv::INTER_NEAREST);
+  return mask;
+}
+
 // Returns false when a requested regression bound is violated.
 bool evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area,
                 InvivoChecks const& chk, std::vector<std::string> const& sites) {
@@ -216,10 +225,9 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       // p >= 1/2), found or not -- what the network gives the contour fit.
       std::vector<std::pair<double, double>> cover;  // per mask shaft (ms): its fraction the network covers, as shaft / instrument
       if (net) {
-        cv::Mat shaft_like, instrument, instrument_like;
-        cv::resize(seg.feature() < 128, shaft_like, im.size(), 0, 0, cv::INTER_NEAREST);
-        cv::resize(net->probabilities(im).instrument, instrument, seg.fieldOfView().mask.size(), 0, 0, cv::INTER_LINEAR);
-        cv::resize(instrument >= 0.5, instrument_like, im.size(), 0, 0, cv::INTER_NEAREST);
+        ShaftProbabilities const p = net->probabilities(im);
+        cv::Mat const shaft_like = networkMask(p.shaft, seg.fieldOfView().mask.size(), im.size());
+        cv::Mat const instrument_like = networkMask(p.instrument, seg.fieldOfView().mask.size(), im.size());
         for (auto const& [id, m] : shafts)
           if (cv::countNonZero(m) >= kStrictMinPx) {
             double const n = cv::countNonZero(m);
@@ -633,11 +641,11 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
         if (masks_ok) {
           std::vector<cv::Mat> components;
           strict += scoreStrict(roboticMaskShafts(mask_frames, net ? &components : nullptr), r.contours);
-          if (net) {  // the network's cover of each: its masks at p >= 1/2 brought to the frame's size
+          if (net) {  // the network's cover of each, as for the stills
             ShaftProbabilities const p = net->probabilities(im);
-            cv::Mat shaft_like, instrument_like;
-            cv::resize(p.shaft >= 0.5, shaft_like, im.size(), 0, 0, cv::INTER_NEAREST);
-            cv::resize(p.instrument >= 0.5, instrument_like, im.size(), 0, 0, cv::INTER_NEAREST);
+            cv::Size const processing(im.cols / r.scale, im.rows / r.scale);
+            cv::Mat const shaft_like = networkMask(p.shaft, processing, im.size());
+            cv::Mat const instrument_like = networkMask(p.instrument, processing, im.size());
             for (cv::Mat const& m : components) {
               covered += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
               covered_instrument += cv::countNonZero(m & instrument_like) * 2 >= cv::countNonZero(m);
