@@ -144,6 +144,22 @@ cv::Mat networkMask(cv::Mat const& probability, cv::Size processing, cv::Size fr
   return mask;
 }
 
+// Each pixel of the annotated mask's outline inside `valid`: its distance (px) to the network
+// mask's outline (the outlines less the image's border).
+void outlineDistances(cv::Mat const& annotated, cv::Mat const& network, cv::Mat const& valid, std::vector<double>& out) {
+  auto outline = [](cv::Mat const& m) {
+    cv::Mat e;
+    cv::erode(m, e, cv::Mat());
+    return cv::Mat(m & ~e);
+  };
+  cv::Mat dist;
+  cv::distanceTransform(~outline(network), dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  cv::Mat const a = outline(annotated) & valid;
+  for (int y = 0; y < a.rows; ++y)
+    for (int x = 0; x < a.cols; ++x)
+      if (a.at<std::uint8_t>(y, x)) out.push_back(dist.at<float>(y, x));
+}
+
 // Returns false when a requested regression bound is violated.
 bool evalInvivo(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, int min_area,
                 InvivoChecks const& chk, std::vector<std::string> const& sites) {
@@ -152,6 +168,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   std::map<std::string, int> strict_images;
   std::map<std::string, int> covered;  // per operation: mask shafts the network covers (learned detector)
   std::map<std::string, int> covered_instrument;  // ... as shaft or jaws: a miss of the instrument, or of its class
+  std::map<std::string, std::vector<double>> outline_px;  // ... the annotated instruments' outline: distance to the network's
   std::map<std::string, int> line_findable;  // per operation (--annotated-mask): found by a line fitted to each side
   std::vector<fs::path> files;
   for (std::string const& op : sites) {
@@ -228,6 +245,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
         ShaftProbabilities const p = net->probabilities(im);
         cv::Mat const shaft_like = networkMask(p.shaft, seg.fieldOfView().mask.size(), im.size());
         cv::Mat const instrument_like = networkMask(p.instrument, seg.fieldOfView().mask.size(), im.size());
+        outlineDistances((cls == 160) | (cls == 70), instrument_like, inner_fov, outline_px[op]);
         for (auto const& [id, m] : shafts)
           if (cv::countNonZero(m) >= kStrictMinPx) {
             double const n = cv::countNonZero(m);
@@ -421,9 +439,13 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   int all_images = 0;
   for (auto const& [op, sc] : strict) {
     printStrict(op.c_str(), sc, strict_images[op], "image");
-    if (net)
-      std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2), %d as shaft or jaws\n", op.c_str(),
-                  covered[op], sc.shafts, covered_instrument[op]);
+    if (net) {
+      std::vector<double>& d = outline_px[op];
+      std::printf("  %s: the network covers %d of the %d shafts (half of their pixels at p >= 1/2), %d as shaft or jaws; the annotated "
+                  "instruments' outline lies %.1f px (median) from its outline, %.0f %% of it beyond 8 px\n", op.c_str(), covered[op],
+                  sc.shafts, covered_instrument[op], percentile(d, 0.5),
+                  100.0 * static_cast<double>(std::count_if(d.begin(), d.end(), [](double v) { return v > 8.0; })) / std::max<std::size_t>(1, d.size()));
+    }
     if (oracle)
       std::printf("  %s: %d of the %d shafts are found by a total least-squares line on each of their sides (the scoring's ceiling)\n",
                   op.c_str(), line_findable[op], sc.shafts);
