@@ -135,14 +135,26 @@ void printStrict(char const* what, StrictScore const& s, int frames, char const*
               percentile(s.side_median_px, 0.9));
 }
 
-// A network probability's mask at p >= 1/2 as the learned detector sees it (resized bilinearly to
-// the processing size), brought to the frame's size: what the network covers.
-cv::Mat networkMask(cv::Mat const& probability, cv::Size processing, cv::Size frame) {
-  cv::Mat at_processing, mask;
-  cv::resize(probability, at_processing, processing, 0, 0, cv::INTER_LINEAR);
-  cv::resize(at_processing >= 0.5, mask, frame, 0, 0, cv::INTER_NEAREST);
-  return mask;
-}
+// The network's shaft and instrument (shaft or jaws) masks at p >= 1/2 as the learned detector
+// sees them (resized bilinearly to the processing size), brought to the frame's size.
+struct NetworkMasks {
+  cv::Mat shaft, instrument;
+  NetworkMasks(ShaftProbabilities const& p, cv::Size processing, cv::Size frame)
+      : shaft(atFrame(p.shaft, processing, frame)), instrument(atFrame(p.instrument, processing, frame)) {}
+  /// The share of a mask's pixels that each covers (shaft, instrument).
+  std::pair<double, double> cover(cv::Mat const& m) const {
+    double const n = cv::countNonZero(m);
+    return {cv::countNonZero(m & shaft) / n, cv::countNonZero(m & instrument) / n};
+  }
+
+ private:
+  static cv::Mat atFrame(cv::Mat const& probability, cv::Size processing, cv::Size frame) {
+    cv::Mat at_processing, mask;
+    cv::resize(probability, at_processing, processing, 0, 0, cv::INTER_LINEAR);
+    cv::resize(at_processing >= 0.5, mask, frame, 0, 0, cv::INTER_NEAREST);
+    return mask;
+  }
+};
 
 // Each pixel of the annotated mask's outline inside `valid`: its distance (px) to the network
 // mask's outline (the outlines less the image's border).
@@ -242,14 +254,11 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
       // p >= 1/2), found or not -- what the network gives the contour fit.
       std::vector<std::pair<double, double>> cover;  // per mask shaft (ms): its fraction the network covers, as shaft / instrument
       if (net) {
-        ShaftProbabilities const p = net->probabilities(im);
-        cv::Mat const shaft_like = networkMask(p.shaft, seg.fieldOfView().mask.size(), im.size());
-        cv::Mat const instrument_like = networkMask(p.instrument, seg.fieldOfView().mask.size(), im.size());
-        outlineDistances((cls == 160) | (cls == 70), instrument_like, inner_fov, outline_px[op]);
+        NetworkMasks const nm(net->probabilities(im), seg.fieldOfView().mask.size(), im.size());
+        outlineDistances((cls == 160) | (cls == 70), nm.instrument, inner_fov, outline_px[op]);
         for (auto const& [id, m] : shafts)
           if (cv::countNonZero(m) >= kStrictMinPx) {
-            double const n = cv::countNonZero(m);
-            cover.emplace_back(cv::countNonZero(m & shaft_like) / n, cv::countNonZero(m & instrument_like) / n);
+            cover.push_back(nm.cover(m));
             covered[op] += cover.back().first >= 0.5;
             covered_instrument[op] += cover.back().second >= 0.5;
           }
@@ -664,13 +673,11 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
           std::vector<cv::Mat> components;
           strict += scoreStrict(roboticMaskShafts(mask_frames, net ? &components : nullptr), r.contours);
           if (net) {  // the network's cover of each, as for the stills
-            ShaftProbabilities const p = net->probabilities(im);
-            cv::Size const processing(im.cols / r.scale, im.rows / r.scale);
-            cv::Mat const shaft_like = networkMask(p.shaft, processing, im.size());
-            cv::Mat const instrument_like = networkMask(p.instrument, processing, im.size());
+            NetworkMasks const nm(net->probabilities(im), cv::Size(im.cols / r.scale, im.rows / r.scale), im.size());
             for (cv::Mat const& m : components) {
-              covered += cv::countNonZero(m & shaft_like) * 2 >= cv::countNonZero(m);
-              covered_instrument += cv::countNonZero(m & instrument_like) * 2 >= cv::countNonZero(m);
+              auto const [shaft, instrument] = nm.cover(m);
+              covered += shaft >= 0.5;
+              covered_instrument += instrument >= 0.5;
             }
           }
         }
