@@ -2,7 +2,7 @@
 # Fuzzes every harness of test/fuzz with libFuzzer (clang, ASan + UBSan) for SECONDS each
 # (default 600), after replaying its seeds and its regression inputs. Builds build/fuzz first.
 #   scripts/fuzz.sh [SECONDS] [HARNESS...]     e.g. scripts/fuzz.sh 15 geometry
-#   scripts/fuzz.sh build                       only build them (scripts/setup.sh does)
+#   scripts/fuzz.sh build                       only build them (scripts/test.sh does)
 # The growing corpus stays in build/fuzz/corpus/<harness>; a crash is saved in
 # build/fuzz/crashes/ and fails the script (make it a regression: copy it into
 # test/fuzz/regressions/<harness>/ with the fix). Summary: build/fuzz/summary.txt.

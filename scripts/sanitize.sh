@@ -63,7 +63,7 @@ fi
 n_reports=$(( in_files + in_log ))
 tests_line="$(grep -E 'tests passed|tests failed' "$B/ctest.log" | tail -1)"
 {
-  echo "sanitize ($type): $(git rev-parse --short HEAD) $(date -u +%Y-%m-%dT%H:%MZ), ${minutes} min of tests"
+  echo "sanitize ($type): $(sed -n 's/.*REVISION "\(.*\)"/\1/p' "$B/generated/endo_guidance_git_revision.h" 2>/dev/null) $(date -u +%Y-%m-%dT%H:%MZ), ${minutes} min of tests"
   echo "tests: ${tests_line:-no ctest summary (see $B/ctest.log)}"
   echo "sanitizer reports: $n_reports"
   [ "$thread" -eq 0 ] || { echo "TSan reports wholly inside ROS' own libraries (not counted), by kind and first function:"; head -20 "$B/tsan_outside.txt"; }

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Installs every Debian 12 package endo_guidance needs (ROS 1 from Debian, OpenCV, Eigen, ViSP,
-# GoogleTest/Benchmark), then configures and builds the package with plain CMake into build/.
+# GoogleTest/Benchmark, clang for the fuzz harnesses), then configures and builds the package with
+# plain CMake into build/ (the fuzz harnesses are the tests' to build: scripts/test.sh).
+# The list must hold every package the build and the scripts use, or a Depends of one (never a
+# Recommends): ctest setup_packages checks it, scripts/fresh_debian_check.sh proves it.
 # Idempotent: a second run with nothing changed only checks and re-runs an incremental build.
 # Usage: scripts/setup.sh [--no-build]
 set -euo pipefail
@@ -20,8 +23,12 @@ PKGS=(
   librosbag-dev libroslz4-dev libbz2-dev python3-rosbag python3-rostopic python3-sensor-msgs rosbash ros-core
   libopencv-dev libeigen3-dev libvisp-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev librostest-dev python3-rostest
+  python3-tf2-ros python3-scipy
   rviz xvfb xauth imagemagick image-transport-tools python3-matplotlib python3-opencv
-  chromium clang
+  chromium
+  # the fuzz harnesses (scripts/fuzz.sh, the tests): clang with its sanitizer and libFuzzer
+  # runtimes and OpenMP header, which clang-14 only recommends
+  clang libclang-rt-14-dev libomp-14-dev
 )
 
 missing=()
@@ -52,6 +59,3 @@ status=0
 cmake --build build -j"$(nproc)" --target all tests -- --no-print-directory >build/build.log 2>&1 || status=$?
 grep -vE '^\[ *[0-9]+%\] (Built target|Generating|Building)|^Scanning' build/build.log || true
 [ "$status" -eq 0 ] || { echo "[setup] build failed (build/build.log)" >&2; exit "$status"; }
-# The fuzz harnesses (clang, ASan + UBSan): the suite replays their corpus (ctest fuzz_replay).
-echo "[setup] building the fuzz harnesses (build/fuzz)"
-bash scripts/fuzz.sh build
