@@ -70,7 +70,7 @@ case "$MODE" in
     ;;
   --loso)
     L="$OUT/loso"
-    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
+    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | sed 's/--//g' | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
     mkdir -p "$L"
     for site in ${SITES:-OP1 OP2 OP3 DS2}; do
       train "$L/$site" "$site"
