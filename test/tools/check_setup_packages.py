@@ -290,8 +290,9 @@ def ros_files(source):
              for f in fs if f.endswith((".launch", ".test", ".xml"))]
     for path in files:
         text = open(path).read()
-        for pkg, typ in re.findall(r'<node\b[^>]*?pkg="([^"$]+)"[^>]*?type="([^"$]+)"', text) + \
-                re.findall(r'<node\b[^>]*?type="([^"$]+)"[^>]*?pkg="([^"$]+)"', text)[::-1]:
+        nodes = re.findall(r'<node\b[^>]*?pkg="([^"$]+)"[^>]*?type="([^"$]+)"', text)
+        nodes += [(pkg, typ) for typ, pkg in re.findall(r'<node\b[^>]*?type="([^"$]+)"[^>]*?pkg="([^"$]+)"', text)]
+        for pkg, typ in nodes:
             if pkg == "endo_guidance":
                 continue
             cands = ["/usr/lib/%s/%s" % (pkg, typ), "/usr/share/%s/scripts/%s" % (pkg, typ), "/usr/bin/" + typ]
