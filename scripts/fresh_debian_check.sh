@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Both README commands on a fresh Debian 12 (bookworm) minbase system, as a new user would meet
 # them: a debootstrap chroot (/proc, /sys, /dev, /dev/pts, /dev/shm, /etc/hosts, resolv.conf) with
-# this working tree copied in (tracked and untracked, not ignored, files; build/ left out) and
+# this working tree copied in (what git neither ignores nor keeps in .git; build/ left out) and
 # ../shared bind-mounted read-only beside it. Runs scripts/run.sh (set-up from nothing, build,
 # the demo), then scripts/test.sh, prints the tail and wall time of each, fails when either fails.
 # The minbase system is made once and kept as a tarball (build/fresh_debian/minbase.tar);
 # every run unpacks a new root from it.
-# Usage: sudo scripts/fresh_debian_check.sh   (root: debootstrap, mount, chroot; ~45 min on 2 cores)
+# Usage: sudo scripts/fresh_debian_check.sh   (root: debootstrap, mount, chroot; ~30 min on 2 cores)
 #   FRESH_DIR (default build/fresh_debian), DEBIAN_MIRROR (default http://deb.debian.org/debian)
 set -euo pipefail
 cd "$(dirname "$0")/.."
