@@ -46,6 +46,15 @@ std::variant<RefinedLine, ContourRejection> refineSide(SideFit const& sides, int
   return *r;
 }
 
+// Side s without edges in the frame as its own line (a mask's side): the covariance of its points'
+// residuals plus mask_side_sigma_px at each end; no edge points.
+std::optional<RefinedLine> maskSideLine(SideFit const& sides, int s, ContourLinesParams const& p) {
+  std::vector<double> const w(sides.points[s].size(), 1.0);
+  auto r = summarizeLine(sides.lines[s], sides.points[s], w, std::max(3, p.min_side_points), sides.mask_side_sigma_px);
+  if (r) r->inliers.clear(), r->points = 0;
+  return r;
+}
+
 // The two refined lines as a contour: lines[0] on the left walking from the entry toward the
 // tip (v down), each oriented toward the shaft; nullopt when they cross or do not enclose it.
 // `axis_dir`: the unit direction entry -> tip; `edges`: the lines' edge points, in that order.
@@ -131,9 +140,17 @@ ContourFit refineContour(SideFit const& sides, Region const& region, FieldOfView
   };
   if (sides.rejection != ContourRejection::kNone) return reject(sides.rejection);
   RefinedLine ref[2];
+  bool from_mask = false;
   for (int s = 0; s < 2; ++s) {
     auto r = refineSide(sides, s, bgr, p);
-    if (auto const* why = std::get_if<ContourRejection>(&r)) return reject(*why);
+    if (auto const* why = std::get_if<ContourRejection>(&r)) {
+      if (*why != ContourRejection::kWeakEdges || !(sides.mask_side_sigma_px > 0.0) || from_mask) return reject(*why);
+      auto m = maskSideLine(sides, s, p);
+      if (!m) return reject(*why);
+      from_mask = true;
+      ref[s] = std::move(*m);
+      continue;
+    }
     ref[s] = std::move(std::get<RefinedLine>(r));
     fit.edge_points += ref[s].points;
   }

@@ -105,8 +105,10 @@ namespace {
 // first (edgeChannel(): shafts are greyer than tissue); a side without edges there is sought
 // along its own colour direction (sideColourDirection(): the shaft's colour to the tissue's
 // across the mask's side), as grey fat and membrane are as grey as a shaft. Where the frame has
-// no edges either way the pair is refused: a line on the mask's own side is a few px off, and on
-// a short shaft that tilts its axis by degrees.
+// no edges either way on one side, that side is the mask's own line, its covariance as wide as the
+// mask's outline error (kMaskOutlineSigmaPx), so that pose, trocar and servo weigh it so; with no
+// edges on either side the pair is refused (the frame measures at least one side).
+constexpr double kMaskOutlineSigmaPx = 4.0;  // full-res px: the network's outline to the annotated one, median 3-5 px (docs/accuracy.md)
 ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionFrame const& frame, ContourLinesParams const& p,
                    std::vector<geometry::ApparentContour> const& found) {
   ContourFit f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
@@ -120,6 +122,11 @@ ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionF
       sides.colour_direction[k] = sideColourDirection(frame.bgr, sides.lines[k], t0, t1, inside, outside);
     }
     if (sides.colour_direction[0] || sides.colour_direction[1]) f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
+  }
+  if (f.rejection == ContourRejection::kWeakEdges) {
+    // One side with no edge either way keeps the mask's side, worth what the mask's outline is.
+    sides.mask_side_sigma_px = kMaskOutlineSigmaPx;
+    f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
   }
   if (f.contour && mostlyGlare(frame.bgr, *f.contour, p)) f.rejection = ContourRejection::kGlare;
   else if (f.contour && duplicatesAShaft(*f.contour, found)) f.rejection = ContourRejection::kDuplicate;
@@ -187,7 +194,9 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
   for (bool const instrument : {false, true}) {
     if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
     cv::Mat const& p = instrument ? probability.instrument : probability.shaft;
-    for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours)) {
+    // (the shaft class's outline where its own jaws go on beyond it is no side)
+    cv::Mat const beyond = instrument ? cv::Mat() : probability.instrument;
+    for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours, beyond)) {
       if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
       auto region = regionOf(pair, mask);
       if (!region) continue;

@@ -20,11 +20,15 @@ constexpr double kMinGradient = 0.05; // probability per px: a weaker step is no
 constexpr double kGatePx = 2.0;       // a side's points lie this close to its line
 constexpr double kMaxTurnDeg = 20.0;  // ... with their gradient this close to its normal
 constexpr int kEdgeMarginPx = 3;      // the mask's outline along the view's edge is no side
+constexpr double kBeyondPx = 3.0;     // where the instrument goes on this far outside, the outline is no side
+constexpr double kMinFacingCos = 0.5; // a part's side points face its axis within 60 deg (not its ends)
+constexpr double kPartMaxAngleDeg = 35.0;  // between a part's own sides (the annotated stills' p95: 33 deg)
 
 struct Edgel {
   Eigen::Vector2d x;
   Eigen::Vector2d g;  // unit gradient, into the mask
   double angle;       // its direction
+  int component;      // the mask's connected part it bounds
 };
 
 struct Side {
@@ -35,23 +39,32 @@ struct Side {
   Eigen::Vector2d along() const { return {-n.y(), n.x()}; }
 };
 
-// The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient.
-std::vector<Edgel> maskEdgels(cv::Mat const& prob, FieldOfView const& fov, cv::Mat& smooth) {
+// The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient and
+// connected part (`labels`, CV_32S, 0 off the mask). A point where `beyond` (the instrument's
+// probability; may be empty) stays at 1/2 or more just outside is where the shaft meets its own
+// jaws, not a side.
+std::vector<Edgel> maskEdgels(cv::Mat const& prob, cv::Mat const& beyond, FieldOfView const& fov, cv::Mat& smooth, cv::Mat& labels) {
   cv::GaussianBlur(prob, smooth, cv::Size(), 1.0);
   cv::Mat gx, gy, mask, inner;
   cv::Sobel(smooth, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
   cv::Sobel(smooth, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
   cv::compare(smooth, 0.5, mask, cv::CMP_GE);
   cv::erode(mask, inner, cv::Mat());
+  cv::connectedComponents(mask, labels, 8, CV_32S);
   std::vector<Edgel> out;
   for (int y = 0; y < mask.rows; ++y)
     for (int x = 0; x < mask.cols; ++x) {
       if (!mask.at<std::uint8_t>(y, x) || inner.at<std::uint8_t>(y, x) || nearViewEdge(fov, cv::Point(x, y), kEdgeMarginPx)) continue;
       double const u = gx.at<float>(y, x), v = gy.at<float>(y, x), g = std::hypot(u, v);
       if (g < kMinGradient) continue;
+      if (!beyond.empty()) {
+        int const bx = static_cast<int>(std::lround(x - kBeyondPx * u / g)), by = static_cast<int>(std::lround(y - kBeyondPx * v / g));
+        if (bx >= 0 && by >= 0 && bx < beyond.cols && by < beyond.rows && beyond.at<float>(by, bx) >= 0.5f) continue;
+      }
       // Sub-pixel: out along the gradient to p = 1/2 (first order), at most 1.5 px.
       double const out_px = std::clamp((smooth.at<float>(y, x) - 0.5) / g, 0.0, 1.5);
-      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), Eigen::Vector2d(u / g, v / g), std::atan2(v, u)});
+      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), Eigen::Vector2d(u / g, v / g), std::atan2(v, u),
+                     labels.at<int>(y, x)});
     }
   return out;
 }
@@ -189,6 +202,112 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, doub
   return p;
 }
 
+// A side of a mask part from its points (`idx`): an LMedS line ([Rousseeuw87]), then the points
+// within kGatePx of it whose gradient turns from its normal by under kMaxTurnDeg, refined by total
+// least squares; false unless min_points and half of the points are on it (not a straight side).
+bool sideOfPoints(std::vector<int> const& idx, std::vector<Edgel> const& edgels, int min_points, ContourLinesParams const& p, Side& side) {
+  if (static_cast<int>(idx.size()) < min_points) return false;
+  std::vector<Eigen::Vector2d> pts;
+  Eigen::Vector2d g = Eigen::Vector2d::Zero();
+  for (int i : idx) pts.push_back(edgels[i].x), g += edgels[i].g;
+  auto const r = fitLineLMedS(pts, p.lmeds_samples, p.seed);
+  if (!r) return false;
+  Eigen::Vector2d n = r->line.head<2>();
+  double rho = -r->line.z();
+  if (n.dot(g) < 0.0) n = -n, rho = -rho;
+  double const cos_turn = std::cos(kMaxTurnDeg * M_PI / 180.0);
+  for (int it = 0; it < 3; ++it) {
+    pts.clear();
+    for (int i : idx)
+      if (std::abs(n.dot(edgels[i].x) - rho) <= kGatePx && n.dot(edgels[i].g) > cos_turn) pts.push_back(edgels[i].x);
+    if (static_cast<int>(pts.size()) < min_points || 2 * pts.size() < idx.size()) return false;
+    fitTls(pts, n, rho);
+  }
+  side.n = n;
+  side.rho = rho;
+  side.points = std::move(pts);
+  side.t0 = std::numeric_limits<double>::infinity();
+  side.t1 = -side.t0;
+  for (auto const& q : side.points) side.t0 = std::min(side.t0, side.along().dot(q)), side.t1 = std::max(side.t1, side.along().dot(q));
+  return true;
+}
+
+// Whether side b lies on side a's line: the same normal within 3 deg, its points within kGatePx.
+bool onLine(Side const& a, Side const& b) {
+  if (a.n.dot(b.n) < std::cos(3.0 * M_PI / 180.0)) return false;
+  std::vector<double> d;
+  for (auto const& q : b.points) d.push_back(std::abs(a.n.dot(q) - a.rho));
+  return median(d) <= kGatePx;
+}
+
+// One side through the points of both, refined by total least squares.
+Side joinSides(Side const& a, Side const& b) {
+  Side s = a;
+  s.points.insert(s.points.end(), b.points.begin(), b.points.end());
+  fitTls(s.points, s.n, s.rho);
+  s.t0 = std::numeric_limits<double>::infinity();
+  s.t1 = -s.t0;
+  for (auto const& q : s.points) s.t0 = std::min(s.t0, s.along().dot(q)), s.t1 = std::max(s.t1, s.along().dot(q));
+  return s;
+}
+
+// The pairs of the mask's parts that are one shaft each: a part whose outline, split by its
+// principal axis (second moments), is one straight side on each half facing the axis (its ends
+// left out). These pairs hold whatever the angle between the sides (a shaft near the lens narrows
+// fast toward its tip) and wherever the view's border or the jaws cut the part; parts without one
+// (shafts that touch or cross) are the Hough transform's. Marks the pairs' points used.
+std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat const& labels, cv::Mat const& smooth, std::vector<char>& used,
+                                    int min_points, double min_width, ContourLinesParams const& p) {
+  double max_label = 0.0;
+  cv::minMaxLoc(labels, nullptr, &max_label);
+  std::vector<std::vector<int>> members(static_cast<std::size_t>(max_label) + 1);
+  for (std::size_t i = 0; i < edgels.size(); ++i) members[edgels[i].component].push_back(static_cast<int>(i));
+  double const cos_max = std::cos(kPartMaxAngleDeg * M_PI / 180.0);
+  std::vector<MaskLinePair> out;
+  std::vector<std::array<Side, 2>> sides;  // per pair in out
+  for (std::size_t k = 1; k < members.size(); ++k) {
+    if (static_cast<int>(members[k].size()) < 2 * min_points) continue;
+    cv::Rect box(cv::Point(labels.cols, labels.rows), cv::Point(0, 0));
+    for (int i : members[k]) box |= cv::Rect(static_cast<int>(edgels[i].x.x()) - 2, static_cast<int>(edgels[i].x.y()) - 2, 5, 5);
+    box &= cv::Rect(0, 0, labels.cols, labels.rows);
+    cv::Moments const m = cv::moments(labels(box) == static_cast<int>(k), true);
+    if (m.m00 <= 0.0) continue;
+    Eigen::Vector2d const c(box.x + m.m10 / m.m00, box.y + m.m01 / m.m00);
+    double const th = 0.5 * std::atan2(2.0 * m.mu11, m.mu20 - m.mu02);
+    Eigen::Vector2d const across(-std::sin(th), std::cos(th));
+    std::array<std::vector<int>, 2> half;
+    for (int i : members[k]) {
+      double const d = across.dot(edgels[i].x - c), facing = across.dot(edgels[i].g);
+      if (d < 0.0 && facing > kMinFacingCos) half[0].push_back(i);
+      else if (d > 0.0 && facing < -kMinFacingCos) half[1].push_back(i);
+    }
+    Side a, b;
+    if (!sideOfPoints(half[0], edgels, min_points, p, a) || !sideOfPoints(half[1], edgels, min_points, p, b)) continue;
+    MaskLinePair pair = pairSides(a, b, smooth, cos_max, min_points, min_width, p.min_fill);
+    if (pair.support <= 0.0) continue;
+    for (int i : members[k])
+      if (std::abs(a.n.dot(edgels[i].x) - a.rho) <= kGatePx || std::abs(b.n.dot(edgels[i].x) - b.rho) <= kGatePx) used[i] = 1;
+    // Parts on the same two lines are one shaft broken by an occluder (a suture, a jaw across it).
+    bool merged = false;
+    for (std::size_t j = 0; j < out.size() && !merged; ++j) {
+      auto& [c, d] = sides[j];
+      bool const straight = onLine(a, c) && onLine(b, d), crossed = onLine(a, d) && onLine(b, c);
+      if (!straight && !crossed) continue;
+      Side& ca = straight ? c : d;
+      Side& db = straight ? d : c;
+      MaskLinePair joined = pairSides(joinSides(ca, a), joinSides(db, b), smooth, cos_max, min_points, min_width, p.min_fill);
+      if (joined.support <= 0.0) continue;
+      ca = joinSides(ca, a), db = joinSides(db, b);
+      out[j] = std::move(joined);
+      merged = true;
+    }
+    if (merged) continue;
+    out.push_back(std::move(pair));
+    sides.push_back({std::move(a), std::move(b)});
+  }
+  return out;
+}
+
 // Where the mask goes on from x along dir (steps of 1 px, gaps up to 3 px) until it leaves the
 // view; returns the last mask point and whether the view's edge was reached.
 std::pair<Eigen::Vector2d, bool> followMask(Eigen::Vector2d x, Eigen::Vector2d const& dir, cv::Mat const& smooth, FieldOfView const& fov) {
@@ -222,19 +341,22 @@ void setEntry(MaskLinePair& p, cv::Mat const& smooth, FieldOfView const& fov) {
 }  // namespace
 
 std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
-                                            ContourLinesParams const& params) {
+                                            ContourLinesParams const& params, cv::Mat const& beyond) {
   CV_Assert(probability.type() == CV_32F && probability.size() == fov.mask.size() && scale >= 1);
-  cv::Mat smooth;
-  std::vector<Edgel> const edgels = maskEdgels(probability, fov, smooth);
+  CV_Assert(beyond.empty() || (beyond.type() == CV_32F && beyond.size() == probability.size()));
+  cv::Mat smooth, labels;
+  std::vector<Edgel> const edgels = maskEdgels(probability, beyond, fov, smooth, labels);
   int const min_points = std::max(3, params.min_side_points);
+  double const min_width = params.min_width_px / scale;
   std::vector<char> used(edgels.size(), 0);
+  std::vector<MaskLinePair> out = partPairs(edgels, labels, smooth, used, min_points, min_width, params);
   std::vector<Side> sides;
   double const bin = 2.0 * M_PI / kAngleBins;
   for (auto const& [k, rho] : houghPeaks(edgels, probability.size(), 0.8 * min_points)) {
     Side s;
     if (sideOfPeak(k * bin, rho, edgels, used, min_points, s)) sides.push_back(std::move(s));
   }
-  double const cos_max = std::cos(params.max_angle_deg * M_PI / 180.0), min_width = params.min_width_px / scale;
+  double const cos_max = std::cos(params.max_angle_deg * M_PI / 180.0);
   struct Candidate {
     MaskLinePair pair;
     std::size_t a, b;
@@ -246,13 +368,12 @@ std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfV
         candidates.push_back({std::move(p), i, j});
   std::stable_sort(candidates.begin(), candidates.end(), [](auto const& x, auto const& y) { return x.pair.support > y.pair.support; });
   std::vector<char> taken(sides.size(), 0);
-  std::vector<MaskLinePair> out;
   for (Candidate& c : candidates) {
     if (taken[c.a] || taken[c.b]) continue;
     taken[c.a] = taken[c.b] = 1;
-    setEntry(c.pair, smooth, fov);
     out.push_back(std::move(c.pair));
   }
+  for (MaskLinePair& p : out) setEntry(p, smooth, fov);
   return out;
 }
 

@@ -32,17 +32,22 @@ struct MaskLinePair {
 };
 
 /// The shafts of a probability mask (CV_32F in [0, 1], the field of view's size) as pairs of
-/// straight sides. Every boundary point of the mask (p >= 1/2, away from the view's edge) votes
-/// in a Hough transform of oriented lines ([Duda72]) about its own gradient's direction only
-/// ([OGorman76]), so a side's votes do not mix with those of the facing side. Each peak is a
-/// side: its points within 2 px, refined by total least squares. Two sides pair when they face
-/// each other within max_angle_deg, overlap over min_side_points and over half their distance,
-/// lie min_width_px apart or more and the strip between them is mask (min_fill); the best
-/// supported pairs first, each side used once, each keeping its points where the two face each
-/// other (beyond, a side's line runs on along a jaw or another shaft). Unlike the components of
-/// the mask, this keeps shafts that touch or cross apart and joins the pieces of a broken one.
+/// straight sides. Its boundary points (p >= 1/2, away from the view's edge; where `beyond`, the
+/// instrument's probability, goes on outside, the shaft meets its own jaws: no side) give:
+/// - first, each connected part of the mask that is one shaft: its outline split by its principal
+///   axis is one straight side on each half (LMedS, [Rousseeuw87]), facing each other within 35 deg
+///   (a shaft near the lens narrows fast toward its tip; the border may cut it anywhere);
+/// - then, from the points left, a Hough transform of oriented lines ([Duda72]), each point voting
+///   about its own gradient's direction only ([OGorman76]), so a side's votes do not mix with
+///   those of the facing side. Each peak is a side: its points within 2 px, refined by total least
+///   squares. Two sides pair when they face each other within max_angle_deg, overlap over
+///   min_side_points and over half their distance, lie min_width_px apart or more and the strip
+///   between them is mask (min_fill); the best supported pairs first, each side used once, each
+///   keeping its points where the two face each other (beyond, a side's line runs on along a jaw
+///   or another shaft). Unlike the components of the mask, this keeps shafts that touch or cross
+///   apart and joins the pieces of a broken one.
 std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
-                                            ContourLinesParams const& params);
+                                            ContourLinesParams const& params, cv::Mat const& beyond = cv::Mat());
 
 /// The pair as the contour fit's input at full resolution (x_full = scale x + (scale - 1) / 2):
 /// its lines with the shaft on their positive side, the points behind them, entry and far end.

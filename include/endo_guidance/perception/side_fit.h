@@ -27,6 +27,9 @@ struct SideFit {
   ContourRejection rejection = ContourRejection::kNone;
   /// Per side, the colour direction its edge is located along (edge_profile.h); unset: edgeChannel().
   std::array<std::optional<ColourDirection>, 2> colour_direction;
+  /// > 0: one side without edges in the frame keeps its own line (a mask's side) in the contour,
+  /// with this systematic error (full-resolution px) at each end in its covariance; 0: refused.
+  double mask_side_sigma_px = 0.0;
   /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
   /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
