@@ -129,3 +129,94 @@ TEST(MaskLinePairs, NothingFromAnEmptyOrThinMask) {
   Strip const thin{{-20.0, 120.0}, {200.0, 100.0}, 3.0};
   EXPECT_TRUE(findMaskLinePairs(draw({thin}), fullView(), 2, p).empty());
 }
+
+namespace {
+// A wedge entering from the left: its sides through (0, y0 -+ w0 / 2) and (x1, y1 -+ w1 / 2), closed
+// at x = x1; anti-aliased as draw().
+cv::Mat wedge(double y0, double w0, double x1, double y1, double w1, std::array<Eigen::Vector3d, 2>& lines) {
+  for (int k = 0; k < 2; ++k) {
+    double const s = k == 0 ? -0.5 : 0.5;
+    Eigen::Vector3d l = Eigen::Vector3d(0.0, y0 + s * w0, 1.0).cross(Eigen::Vector3d(x1, y1 + s * w1, 1.0));
+    l /= l.head<2>().norm();
+    if (l.dot(Eigen::Vector3d(0.5 * x1, 0.5 * (y0 + y1), 1.0)) < 0.0) l = -l;  // positive inside
+    lines[k] = l;
+  }
+  cv::Mat p(kH, kW, CV_32F);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      double const d = std::min({lines[0].dot(Eigen::Vector3d(x, y, 1)), lines[1].dot(Eigen::Vector3d(x, y, 1)), x1 - x});
+      p.at<float>(y, x) = static_cast<float>(std::clamp(0.5 + d, 0.0, 1.0));
+    }
+  return p;
+}
+
+// Whether each of the pair's sides is one of `lines` within tol_px at x = 20 and x = 120.
+bool pairOnLines(MaskLinePair const& p, std::array<Eigen::Vector3d, 2> const& lines, double tol_px) {
+  for (auto const& side : p.sides) {
+    bool matched = false;
+    for (auto const& l : lines) {
+      if (side.line.head<2>().dot(l.head<2>()) < std::cos(1.0 * M_PI / 180.0)) continue;
+      bool near = true;
+      for (double x : {20.0, 120.0}) {
+        double const y = -(l.x() * x + l.z()) / l.y();  // on l
+        near = near && std::abs(side.line.dot(Eigen::Vector3d(x, y, 1.0))) <= tol_px;
+      }
+      matched = matched || near;
+    }
+    if (!matched) return false;
+  }
+  return true;
+}
+}  // namespace
+
+TEST(MaskLinePairs, ATaperingMaskIsOnePairOnItsSides) {
+  // A shaft near the lens narrows fast toward its tip: 70 px wide at the border, 20 px at
+  // x = 150, its sides 19 deg apart (max_angle_deg 20 would not pair them as two Hough sides
+  // had they been 21 deg apart; a part of the mask on its own is paired up to 35 deg).
+  ContourLinesParams p;
+  p.max_angle_deg = 10.0;
+  std::array<Eigen::Vector3d, 2> lines;
+  cv::Mat const m = wedge(120.0, 70.0, 150.0, 110.0, 20.0, lines);
+  auto const pairs = findMaskLinePairs(m, fullView(), 2, p);
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_TRUE(pairOnLines(pairs[0], lines, 0.3));
+  EXPECT_LE(pairs[0].entry.x(), 8.0);
+  // Sides 53 deg apart are a corner of something, not a shaft.
+  EXPECT_TRUE(findMaskLinePairs(wedge(120.0, 150.0, 150.0, 120.0, 6.0, lines), fullView(), 2, p).empty());
+}
+
+TEST(MaskLinePairs, AShaftCutLengthwiseByTheBorderKeepsTheSidesItShows) {
+  // Entering at the bottom-left corner, 44 px wide: the left and the bottom edge each cut one of
+  // its sides short; both sides are still its lines.
+  Strip const s{{-40.0, 300.0}, {170.0, 110.0}, 44.0};
+  auto const pairs = findMaskLinePairs(draw({s}), fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(pairs[0], s, {120.0, 240.0}, 0.3));
+  EXPECT_GE(depthAt(fullView(), pairs[0].far), 40.0);  // the far end is the tip, inside the view
+}
+
+TEST(MaskLinePairs, WhereTheInstrumentGoesOnTheShaftsOutlineIsNoSide) {
+  // The shaft class along y 98-122 from the left edge to x = 200; its jaws (instrument, not
+  // shaft) lie along its lower side from x = 100 on. That stretch of the shaft's outline is the
+  // shaft-jaws boundary: with the instrument's probability beyond, no side point lies there.
+  Strip const s{{-20.0, 110.0}, {200.0, 110.0}, 24.0};
+  cv::Mat const shaft = draw({s});
+  cv::Mat instrument = shaft.clone();
+  instrument(cv::Rect(100, 110, 100, 40)).setTo(1.0f);
+  auto const with = findMaskLinePairs(shaft, fullView(), 2, ContourLinesParams{}, instrument);
+  ASSERT_EQ(with.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(with[0], s, {20.0, 90.0}, 0.3));
+  for (auto const& side : with[0].sides)
+    for (auto const& q : side.points)
+      if (q.y() > 110.0) {
+        EXPECT_LT(q.x(), 100.0);
+      }
+  // Without it, the lower side runs on along the jaws.
+  auto const without = findMaskLinePairs(shaft, fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(without.size(), 1u);
+  double reach = 0.0;
+  for (auto const& side : without[0].sides)
+    for (auto const& q : side.points)
+      if (q.y() > 110.0) reach = std::max(reach, q.x());
+  EXPECT_GT(reach, 150.0);
+}
