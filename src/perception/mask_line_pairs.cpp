@@ -22,6 +22,7 @@ constexpr double kMaxTurnDeg = 20.0;  // ... with their gradient this close to i
 constexpr int kEdgeMarginPx = 3;      // the mask's outline along the view's edge is no side
 constexpr double kBeyondPx = 3.0;     // where the instrument goes on this far outside, the outline is no side
 constexpr double kMinFacingCos = 0.5; // a part's side points face its axis within 60 deg (not its ends)
+constexpr double kPartInStrip = 0.9;   // a part that is one shaft lies this much between its sides
 constexpr double kPartMaxAngleDeg = 35.0;  // between a part's own sides (the annotated stills' p95: 33 deg)
 
 struct Edgel {
@@ -285,6 +286,15 @@ std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat co
     if (!sideOfPoints(half[0], edgels, min_points, p, a) || !sideOfPoints(half[1], edgels, min_points, p, b)) continue;
     MaskLinePair pair = pairSides(a, b, smooth, cos_max, min_points, min_width, p.min_fill);
     if (pair.support <= 0.0) continue;
+    // The part is this shaft only when it lies between the two lines (shafts that touch or cross
+    // fill the lines' strip and more).
+    int inside = 0;
+    for (int y = box.y; y < box.br().y; ++y)
+      for (int x = box.x; x < box.br().x; ++x)
+        if (labels.at<int>(y, x) == static_cast<int>(k) && a.n.dot(Eigen::Vector2d(x, y)) - a.rho >= -kGatePx &&
+            b.n.dot(Eigen::Vector2d(x, y)) - b.rho >= -kGatePx)
+          ++inside;
+    if (inside < kPartInStrip * m.m00) continue;
     for (int i : members[k])
       if (std::abs(a.n.dot(edgels[i].x) - a.rho) <= kGatePx || std::abs(b.n.dot(edgels[i].x) - b.rho) <= kGatePx) used[i] = 1;
     // Parts on the same two lines are one shaft broken by an occluder (a suture, a jaw across it).
