@@ -23,6 +23,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -84,7 +85,7 @@ constexpr int kSkipped = 77;            // exit status when the data is absent (
 constexpr int kStrictMinPx = 300;        // in-vivo: a mask shaft is an instance with this much class 160
 constexpr int kStrictRoboticMinPx = 500; // robotic: one shaft per connected component of this much
 bool baseline = false;  // --baseline: the Canny + Hough baseline instead of the segmentation (in-vivo stills)
-bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated masks (in-vivo stills)
+bool annotated_mask = false;  // --annotated-mask: the learned detector's stage fed the annotated masks (stills; the videos' annotated frames)
 
 // The learned detector's stage after its network (shaftsOfProbability()) fed the annotated
 // shaft and instrument (shaft or jaws) masks, reduced to the network's input size and back as the
@@ -559,6 +560,21 @@ std::vector<MaskShaft> roboticMaskShafts(std::vector<cv::Mat> const& masks, std:
   return ms;
 }
 
+// The mask videos' classes combined (CV_8U, full resolution): each pixel snapped to the nearest
+// of 0, 70 (head and jaws) and 160 (shaft), the larger where the videos overlap.
+cv::Mat roboticClasses(std::vector<cv::Mat> const& masks) {
+  cv::Mat out;
+  for (cv::Mat const& m : masks) {
+    cv::Mat g, c;
+    cv::cvtColor(m, g, cv::COLOR_BGR2GRAY);
+    c = cv::Mat::zeros(g.size(), CV_8U);
+    c.setTo(70, (g >= 35) & (g < 115));
+    c.setTo(160, g >= 115);
+    out = out.empty() ? c : cv::max(out, c);
+  }
+  return out;
+}
+
 // Annotated axes found: a detection's image axis (bisector of its lines) within kAxisFoundPx of
 // both annotated points, each annotation and detection used once (nearest first).
 constexpr double kAxisFoundPx = 40.0;
@@ -632,7 +648,17 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     int axes_found40 = 0;
     int covered = 0, covered_instrument = 0;  // mask shafts the network covers, as shaft / as shaft or jaws (learned detector)
     std::unique_ptr<ShaftNet> net;
-    if (sp.detector == SegmentationParams::Detector::kLearned) net = std::make_unique<ShaftNet>(sp.learned.model);
+    if (sp.detector == SegmentationParams::Detector::kLearned && !annotated_mask) net = std::make_unique<ShaftNet>(sp.learned.model);
+    // --annotated-mask: each annotated frame on its own (no tracking, no pipeline), its mask
+    // videos' classes as the network's output.
+    AnnotatedMaskDetector* oracle = nullptr;
+    std::optional<InstrumentSegmenter> oracle_seg;
+    SegmentationResult oracle_result;
+    if (annotated_mask) {
+      auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model).inputSize());
+      oracle = d.get();
+      oracle_seg.emplace(sp, std::move(d));
+    }
     cv::Mat im;
     std::map<int, std::vector<Ann>> by_frame;
     for (auto const& a : list) by_frame[a.frame].push_back(a);
@@ -647,16 +673,26 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
       if (im.size() != cv::Size(720, 576)) break;
       bool masks_ok = !mask_caps.empty();
       for (std::size_t k = 0; k < mask_caps.size(); ++k) masks_ok = mask_caps[k].read(mask_frames[k]) && masks_ok;
-      out = pipe.process(im);
+      auto it = by_frame.find(frame);
+      if (oracle) {
+        if (it == by_frame.end() || !masks_ok) {
+          ++frame;
+          continue;
+        }
+        oracle->setClasses(roboticClasses(mask_frames));
+        oracle_seg->reset();
+        oracle_result = oracle_seg->process(im);
+      } else {
+        out = pipe.process(im);
+      }
       for (auto const& o : out.instruments) all_axes.push_back(o.pose.axis);
       if (frame > 185)
         for (auto const& p : out.insertion_points) {
           trocar_track[p.id].push_back(p.estimate.position);
           trocar_image[p.id] = p.image_point;
         }
-      auto it = by_frame.find(frame);
       if (it != by_frame.end()) {
-        SegmentationResult const& r = out.segmentation;
+        SegmentationResult const& r = oracle ? oracle_result : out.segmentation;
         ++frames_annot;
         dets += static_cast<int>(r.contours.size());
         // A detection whose image axis passes within 20 px of no annotated shaft axis is false.
@@ -848,8 +884,8 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
-                           "       [--annotated-mask]   (in-vivo stills only: the learned detector's line stage fed the annotated\n"
-                           "                             shaft and instrument masks at the model's input size, its ceiling)\n"
+                           "       [--annotated-mask]   (the learned detector's line stage fed the annotated shaft and instrument\n"
+                           "                             masks at the model's input size, its ceiling; the videos: each annotated frame alone)\n"
                            "       [--params PARAMS.yaml]   (config/pipeline.yaml or a subset: its segmentation group is used)\n"
                            "       [--detector colour|learned] [--model MODEL.yaml]   (override the parameters' segmentation/detector, learned_model)\n"
                            "       [--sites OP1,OP2,OP3]   (the in-vivo operations scored; default all three)\n"
@@ -872,11 +908,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (annotated_mask) {
-    detector = "learned";  // (its parameters; the model gives the input size)
-    if (robotic) std::printf("--annotated-mask: the in-vivo stills only\n");
-    robotic = false;
-  }
+  if (annotated_mask) detector = "learned";  // (its parameters; the model gives the input size)
   try {
     if (!detector.empty()) pp.segmentation.detector = io::detectorFromString(detector);
     if (!model.empty()) pp.segmentation.learned.model = model;
