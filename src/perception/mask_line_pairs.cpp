@@ -38,6 +38,11 @@ struct Side {
   double t0 = 0.0, t1 = 0.0;  // extent along (-n.y, n.x)
   std::vector<Eigen::Vector2d> points;
   Eigen::Vector2d along() const { return {-n.y(), n.x()}; }
+  void setExtent() {
+    t0 = std::numeric_limits<double>::infinity();
+    t1 = -t0;
+    for (auto const& q : points) t0 = std::min(t0, along().dot(q)), t1 = std::max(t1, along().dot(q));
+  }
 };
 
 // The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient and
@@ -144,9 +149,7 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
   }
   side.n = n;
   fitTls(side.points, side.n, side.rho);
-  side.t0 = std::numeric_limits<double>::infinity();
-  side.t1 = -side.t0;
-  for (auto const& q : side.points) side.t0 = std::min(side.t0, side.along().dot(q)), side.t1 = std::max(side.t1, side.along().dot(q));
+  side.setExtent();
   return true;
 }
 
@@ -227,9 +230,7 @@ bool sideOfPoints(std::vector<int> const& idx, std::vector<Edgel> const& edgels,
   side.n = n;
   side.rho = rho;
   side.points = std::move(pts);
-  side.t0 = std::numeric_limits<double>::infinity();
-  side.t1 = -side.t0;
-  for (auto const& q : side.points) side.t0 = std::min(side.t0, side.along().dot(q)), side.t1 = std::max(side.t1, side.along().dot(q));
+  side.setExtent();
   return true;
 }
 
@@ -246,9 +247,7 @@ Side joinSides(Side const& a, Side const& b) {
   Side s = a;
   s.points.insert(s.points.end(), b.points.begin(), b.points.end());
   fitTls(s.points, s.n, s.rho);
-  s.t0 = std::numeric_limits<double>::infinity();
-  s.t1 = -s.t0;
-  for (auto const& q : s.points) s.t0 = std::min(s.t0, s.along().dot(q)), s.t1 = std::max(s.t1, s.along().dot(q));
+  s.setExtent();
   return s;
 }
 
