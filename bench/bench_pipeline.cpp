@@ -352,6 +352,45 @@ void BM_LearnedRealStillsPairedWithHSV(benchmark::State& st) {
   cv::setNumThreads(1);
 }
 
+// The learned detector's stage after its network alone (shaftsOfProbability(): side pairs,
+// contour fit, tips) on the stills, the network's probabilities and the reduced frame computed
+// beforehand (640 x 480 at half scale, as the detector runs them).
+void BM_LearnedLineStagePairedWithHSV(benchmark::State& st) {
+  auto const& f = invivoStills();
+  if (f.images.empty()) {
+    st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_rigid_invivo").string()).c_str());
+    return;
+  }
+  struct Still {
+    cv::Mat small;
+    FieldOfView fov;
+    ShaftProbabilities p;
+  };
+  static std::map<uchar const*, Still> stills;  // per image (its pixels' address)
+  if (stills.empty()) {
+    ShaftNet net(defaultShaftModel(), 1);
+    for (cv::Mat const& im : f.images) {
+      Still& s = stills[im.data];
+      reduceImage(im, 2, s.small);
+      s.fov = detectFieldOfView(s.small);
+      ShaftProbabilities const q = net.probabilities(im);
+      cv::resize(q.shaft, s.p.shaft, s.small.size(), 0, 0, cv::INTER_LINEAR);
+      cv::resize(q.instrument, s.p.instrument, s.small.size(), 0, 0, cv::INTER_LINEAR);
+    }
+  }
+  SegmentationParams const sp = learnedParams(1, 1).segmentation;
+  std::vector<Eigen::Vector3d> const no_trocars;
+  cv::Mat labels;
+  double shafts = 0.0, calls = 0.0;
+  pairedWithHSV(st, f, [&](cv::Mat const& im) {
+    Still const& s = stills.at(im.data);
+    DetectionFrame const frame{im, s.small, s.fov, static_cast<double>(cv::countNonZero(s.fov.mask)), 2, no_trocars, 1};
+    shafts += static_cast<double>(shaftsOfProbability(frame, s.p, sp, labels).contours.size());
+    calls += 1.0;
+  });
+  st.counters["shafts"] = shafts / std::max(1.0, calls);  // per still
+}
+
 // The simulator's cost per frame: rendering three instruments on textured tissue (its frame
 // rate is bounded by 1 / this).
 void BM_SimulatorRender(benchmark::State& st) {
@@ -385,6 +424,7 @@ BENCHMARK(BM_LearnedRealVideoPairedWithHSV)
     ->ArgsProduct({{1, 2}, {1, 2}, {1, 4}})
     ->ArgNames({"endovis_robotic_dataset", "threads", "detect_every"})
     ->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_LearnedLineStagePairedWithHSV)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LearnedRealStillsPairedWithHSV)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMicrosecond);
 
 }  // namespace
