@@ -353,7 +353,7 @@ std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfV
                                             ContourLinesParams const& params, cv::Mat const& beyond) {
   CV_Assert(probability.type() == CV_32F && probability.size() == fov.mask.size() && scale >= 1);
   CV_Assert(beyond.empty() || (beyond.type() == CV_32F && beyond.size() == probability.size()));
-  cv::Mat smooth, labels;
+  thread_local cv::Mat smooth, labels;  // (their buffers kept from call to call: no page faults per frame)
   std::vector<Edgel> const edgels = maskEdgels(probability, beyond, fov, smooth, labels);
   int const min_points = std::max(3, params.min_side_points);
   double const min_width = params.min_width_px / scale;
