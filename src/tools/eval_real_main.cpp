@@ -784,6 +784,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     } else if (min_found >= 0.0 || max_false_per_frame >= 0.0) {
       std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): met\n", min_found, max_false_per_frame);
     }
+    if (oracle) continue;  // (no pipeline ran: no poses, no insertion points)
     std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:%s\n", frame - 1,
                 trocar_track.empty() ? " none discovered" : "");
     if (verbose && all_axes.size() >= 2) {
