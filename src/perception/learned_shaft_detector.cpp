@@ -121,10 +121,7 @@ ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionF
       for (auto const& q : sides.points[k]) t0 = std::min(t0, d.dot(q)), t1 = std::max(t1, d.dot(q));
       sides.colour_direction[k] = sideColourDirection(frame.bgr, sides.lines[k], t0, t1, inside, outside);
     }
-    if (sides.colour_direction[0] || sides.colour_direction[1]) f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
-  }
-  if (f.rejection == ContourRejection::kWeakEdges) {
-    // One side with no edge either way keeps the mask's side, worth what the mask's outline is.
+    // (and one side with no edge either way keeps the mask's side, worth what the mask's outline is)
     sides.mask_side_sigma_px = kMaskOutlineSigmaPx;
     f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
   }

@@ -304,9 +304,10 @@ std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat co
       if (!straight && !crossed) continue;
       Side& ca = straight ? c : d;
       Side& db = straight ? d : c;
-      MaskLinePair joined = pairSides(joinSides(ca, a), joinSides(db, b), smooth, cos_max, min_points, min_width, p.min_fill);
+      Side ja = joinSides(ca, a), jb = joinSides(db, b);
+      MaskLinePair joined = pairSides(ja, jb, smooth, cos_max, min_points, min_width, p.min_fill);
       if (joined.support <= 0.0) continue;
-      ca = joinSides(ca, a), db = joinSides(db, b);
+      ca = std::move(ja), db = std::move(jb);
       out[j] = std::move(joined);
       merged = true;
     }
