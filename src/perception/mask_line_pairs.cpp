@@ -332,15 +332,19 @@ std::pair<Eigen::Vector2d, bool> followMask(Eigen::Vector2d x, Eigen::Vector2d c
   return {last, false};
 }
 
-// The entry: the end of the pair whose mask reaches the view's edge (moved there), else the end
-// nearer to the edge.
+// The entry: the end of the pair whose mask reaches the view's edge (moved there); of a shaft
+// whose mask reaches it at both ends (it crosses the view), the wider end: the nearer to the lens,
+// as a shaft seen from its trocar's side narrows toward its tip (the shape check's max_widening);
+// else the end nearer to the edge.
 void setEntry(MaskLinePair& p, cv::Mat const& smooth, FieldOfView const& fov) {
   Eigen::Vector2d const u = (p.far - p.entry).normalized();
   auto const [back, back_edge] = followMask(p.entry, -u, smooth, fov);
   auto const [ahead, ahead_edge] = followMask(p.far, u, smooth, fov);
-  if (back_edge && !ahead_edge) {
+  auto width = [&](Eigen::Vector2d const& x) { return p.sides[0].line.dot(x.homogeneous()) + p.sides[1].line.dot(x.homogeneous()); };
+  bool const ahead_wider = width(ahead) > width(back);
+  if (back_edge && (!ahead_edge || !ahead_wider)) {
     p.entry = back;
-  } else if (ahead_edge && !back_edge) {
+  } else if (ahead_edge) {
     p.far = p.entry;
     p.entry = ahead;
   } else if (depthAt(fov, p.far) < depthAt(fov, p.entry)) {

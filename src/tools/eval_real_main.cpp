@@ -751,6 +751,12 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                         a.a.x(), a.a.y(), a.b.x(), a.b.y());
           }
         }
+        if (verbose) {
+          std::printf("  ds%d frame %d: %zu regions [", ds, frame, r.regions.size());
+          for (std::size_t i = 0; i < r.regions.size() && i < r.region_status.size(); ++i)
+            std::printf("%s(a%d)%s", toString(r.region_status[i]), r.regions[i].area, i + 1 < r.regions.size() ? "; " : "");
+          std::printf("]\n");
+        }
         if (!overlay_dir.empty() && frames_annot % 10 == 1) {
           cv::Mat ov = im.clone();
           std::vector<Eigen::Vector3d> ti;

@@ -220,3 +220,18 @@ TEST(MaskLinePairs, WhereTheInstrumentGoesOnTheShaftsOutlineIsNoSide) {
       if (q.y() > 110.0) reach = std::max(reach, q.x());
   EXPECT_GT(reach, 150.0);
 }
+
+TEST(MaskLinePairs, AShaftAcrossTheViewEntersAtItsWiderEnd) {
+  // Through the whole view, left edge to right edge, 60 px wide at one and 30 px at the other:
+  // the wider end is the nearer to the lens, the trocar's side (a shaft narrows toward its tip).
+  std::array<Eigen::Vector3d, 2> lines;
+  cv::Mat const wide_left = wedge(120.0, 60.0, kW + 40.0, 115.0, 26.0, lines);
+  auto const pairs = findMaskLinePairs(wide_left, fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_LE(pairs[0].entry.x(), 8.0);
+  cv::Mat wide_right;
+  cv::flip(wide_left, wide_right, 1);
+  auto const mirrored = findMaskLinePairs(wide_right, fullView(), 2, ContourLinesParams{});
+  ASSERT_EQ(mirrored.size(), 1u);
+  EXPECT_GE(mirrored[0].entry.x(), kW - 9.0);
+}
