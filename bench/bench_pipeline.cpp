@@ -294,11 +294,18 @@ void BM_RealStillsSegmentationPairedWithHSV(benchmark::State& st) {
 }
 
 // ------------------------------------------------------------------ learned detector
-// The learned detector (models/shaft_net.yaml) with `threads` OpenCV threads (the HSV reference
-// runs in the same pool). OpenCV's thread count is global: restored to 1 afterwards.
+// The learned detector (models/shaft_net.yaml, or the model ENDO_GUIDANCE_BENCH_MODEL names, to
+// weigh a candidate against it) with `threads` OpenCV threads (the HSV reference runs in the same
+// pool). OpenCV's thread count is global: restored to 1 afterwards.
+std::string benchModel() {
+  char const* e = std::getenv("ENDO_GUIDANCE_BENCH_MODEL");
+  return e && *e ? e : defaultShaftModel();
+}
+
 PipelineParams learnedParams(int threads, int detect_every) {
   PipelineParams pp;
   pp.segmentation.detector = SegmentationParams::Detector::kLearned;
+  pp.segmentation.learned.model = benchModel();
   pp.segmentation.learned.threads = threads;
   pp.segmentation.tracking.detect_every = detect_every;
   return pp;
@@ -311,7 +318,7 @@ void BM_LearnedNetworkPairedWithHSV(benchmark::State& st) {
     st.SkipWithError(("real data absent: " + (dataDir() / "endovis15_robotic").string()).c_str());
     return;
   }
-  ShaftNet net(defaultShaftModel(), static_cast<int>(st.range(0)));
+  ShaftNet net(benchModel(), static_cast<int>(st.range(0)));
   pairedWithHSV(st, f, [&](cv::Mat const& im) { benchmark::DoNotOptimize(net.probabilities(im).shaft.data); });
   cv::setNumThreads(1);
 }
@@ -368,7 +375,7 @@ void BM_LearnedLineStagePairedWithHSV(benchmark::State& st) {
   };
   static std::map<uchar const*, Still> stills;  // per image (its pixels' address)
   if (stills.empty()) {
-    ShaftNet net(defaultShaftModel(), 1);
+    ShaftNet net(benchModel(), 1);
     for (cv::Mat const& im : f.images) {
       Still& s = stills[im.data];
       reduceImage(im, 2, s.small);

@@ -598,9 +598,15 @@ int axesFound(std::vector<Ann> const& annotated, std::vector<ApparentContour> co
   return found;
 }
 
+// Regression bounds per robotic sequence (negative: none): the annotated axes found (within
+// 20 px) and false detections per frame; the mask shafts found and false per frame (strict, 10 px).
+struct RoboticChecks {
+  double min_found = -1.0, max_false_per_frame = -1.0;
+  double min_strict_found = -1.0, max_strict_false_per_frame = -1.0;
+};
+
 // Returns false when a requested regression bound (per sequence) is violated.
-bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp,
-                 double min_found, double max_false_per_frame) {
+bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, RoboticChecks const& chk) {
   std::ifstream csv(root / "shaft_axis_annotations.csv");
   if (!csv) {
     std::printf("robotic sequences: %s/shaft_axis_annotations.csv absent: skipped\n", root.c_str());
@@ -784,11 +790,20 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                   strict.shafts, covered_instrument);
     double const found_frac = static_cast<double>(found) / std::max(1, n);
     double const false_rate = static_cast<double>(false_dets) / std::max(1, frames_annot);
-    if ((min_found >= 0.0 && found_frac < min_found) || (max_false_per_frame >= 0.0 && false_rate > max_false_per_frame)) {
-      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): VIOLATED\n", min_found, max_false_per_frame);
+    if ((chk.min_found >= 0.0 && found_frac < chk.min_found) || (chk.max_false_per_frame >= 0.0 && false_rate > chk.max_false_per_frame)) {
+      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): VIOLATED\n", chk.min_found, chk.max_false_per_frame);
       ok = false;
-    } else if (min_found >= 0.0 || max_false_per_frame >= 0.0) {
-      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): met\n", min_found, max_false_per_frame);
+    } else if (chk.min_found >= 0.0 || chk.max_false_per_frame >= 0.0) {
+      std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): met\n", chk.min_found, chk.max_false_per_frame);
+    }
+    if (chk.min_strict_found >= 0.0 || chk.max_strict_false_per_frame >= 0.0) {
+      double const strict_found = static_cast<double>(strict.found.back()) / std::max(1, strict.shafts);
+      double const strict_false = static_cast<double>(strict.false_detections) / std::max(1, frames_annot);
+      bool const met = !mask_caps.empty() && !(chk.min_strict_found >= 0.0 && !(strict_found >= chk.min_strict_found)) &&
+                       !(chk.max_strict_false_per_frame >= 0.0 && !(strict_false <= chk.max_strict_false_per_frame));
+      std::printf("  strict regression bounds (mask shafts found >= %.2f, false/frame <= %.3f): %s\n", chk.min_strict_found,
+                  chk.max_strict_false_per_frame, mask_caps.empty() ? "VIOLATED (no mask videos)" : met ? "met" : "VIOLATED");
+      ok = ok && met;
     }
     if (oracle) continue;  // (no pipeline ran: no poses, no insertion points)
     std::printf("  insertion points (assumed fx = fy = 700 px), over frames 186..%d:%s\n", frame - 1,
@@ -860,7 +875,7 @@ int main(int argc, char** argv) {
   int min_area = 1500;
   InvivoChecks chk;
   bool invivo = true, robotic = true;
-  double robotic_min_found = -1.0, robotic_max_false = -1.0;
+  RoboticChecks robotic_chk;
   std::vector<std::string> sites{"OP1", "OP2", "OP3"};
   std::string detector, model;
   for (int i = 1; i < argc; ++i) {
@@ -886,8 +901,10 @@ int main(int argc, char** argv) {
       std::stringstream ss(argv[++i]);
       for (std::string t; std::getline(ss, t, ',');) sites.push_back(t);
     }
-    else if (a == "--robotic-min-found" && i + 1 < argc) robotic_min_found = std::atof(argv[++i]);
-    else if (a == "--robotic-max-false-per-frame" && i + 1 < argc) robotic_max_false = std::atof(argv[++i]);
+    else if (a == "--robotic-min-found" && i + 1 < argc) robotic_chk.min_found = std::atof(argv[++i]);
+    else if (a == "--robotic-max-false-per-frame" && i + 1 < argc) robotic_chk.max_false_per_frame = std::atof(argv[++i]);
+    else if (a == "--robotic-min-strict-found" && i + 1 < argc) robotic_chk.min_strict_found = std::atof(argv[++i]);
+    else if (a == "--robotic-max-strict-false-per-frame" && i + 1 < argc) robotic_chk.max_strict_false_per_frame = std::atof(argv[++i]);
     else {
       std::fprintf(stderr, "usage: endo_guidance_eval_real [--data DIR] [--overlay DIR] [--min-area PX] [--invivo-only|--robotic-only] [--verbose]\n"
                            "       [--baseline]   (in-vivo stills only: the issue's Canny + Hough baseline instead of the segmentation)\n"
@@ -898,6 +915,8 @@ int main(int argc, char** argv) {
                            "       [--sites OP1,OP2,OP3]   (the in-vivo operations scored; default all three)\n"
                            "       [--min-strict-found F] [--max-strict-false-per-image F]   (in-vivo, strict scoring at 10 px; exit 1 if violated)\n"
                            "       [--robotic-min-found F] [--robotic-max-false-per-frame F]   (per robotic sequence; exit 1 if violated)\n"
+                           "       [--robotic-min-strict-found F] [--robotic-max-strict-false-per-frame F]   (per robotic sequence, its mask\n"
+                           "                             shafts, strict scoring at 10 px; exit 1 if violated)\n"
                            "       [--min-found F] [--max-line-px PX] [--max-false-per-image F]   (in-vivo regression bounds; exit 1 if violated)\n");
       return 2;
     }
@@ -936,6 +955,6 @@ int main(int argc, char** argv) {
     robotic = false;
   }
   if (invivo) ok = evalInvivo(fs::path(data) / "endovis15_rigid_invivo", overlay, sp, min_area, chk, sites);
-  if (robotic) ok = evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp, robotic_min_found, robotic_max_false) && ok;
+  if (robotic) ok = evalRobotic(fs::path(data) / "endovis15_robotic", overlay, sp, robotic_chk) && ok;
   return ok ? 0 : 1;
 }
