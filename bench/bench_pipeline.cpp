@@ -428,7 +428,7 @@ BENCHMARK(BM_RealVideoPairedWithHSV)->Arg(1)->Arg(2)->ArgName("endovis_robotic_d
 BENCHMARK(BM_RealStillsSegmentationPairedWithHSV)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LearnedNetworkPairedWithHSV)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LearnedRealVideoPairedWithHSV)
-    ->ArgsProduct({{1, 2}, {1, 2}, {1, 4}})
+    ->ArgsProduct({{1, 2}, {1, 2}, {1, 4, 8}})
     ->ArgNames({"endovis_robotic_dataset", "threads", "detect_every"})
     ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LearnedLineStagePairedWithHSV)->Unit(benchmark::kMicrosecond);
