@@ -11,6 +11,8 @@
 #                                         compares its figures with the committed model's
 #   scripts/train_shaft_net.sh --reference  the committed model's reference output again, on the
 #                                         frame the renderer draws now (after a change to it)
+#   scripts/train_shaft_net.sh --rescore DIR  scores the LOSO models already in DIR (DIR/SITE/shaft_net.yaml)
+#                                         with today's detector, no training; the table -> DIR/table.md
 # Arguments after the mode go to train_shaft_net.py (e.g. --loso --arch mnv2-10 --pretrained
 # build/pretrained --size 256x192 --seed 2: that run's LOSO models and table go to
 # build/training/loso/<its arguments>; SITES="OP3" holds out only those). With --pretrained, the
@@ -28,7 +30,8 @@ OUT=build/training
 
 [ -d "$DATA/endovis15_rigid_invivo" ] || { echo "train_shaft_net.sh: no training data at $DATA (set ENDO_GUIDANCE_DATA)" >&2; exit 2; }
 SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-if ! $PY -c "import torch, torchvision, onnx" 2>/dev/null; then
+TRAINING=1; [ "$MODE" = --rescore ] && TRAINING=0  # (scoring only: no PyTorch, no rendered frames)
+if [ $TRAINING = 1 ] && ! $PY -c "import torch, torchvision, onnx" 2>/dev/null; then
   echo "[train] installing python3-torch python3-torchvision python3-onnx (training only; never needed at run time)"
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends python3-torch python3-torchvision python3-onnx >/dev/null
 fi
@@ -46,8 +49,10 @@ done
 [ -x "$BIN/endo_guidance_synthetic" ] && [ -x "$BIN/endo_guidance_eval_real" ] || bash scripts/setup.sh
 mkdir -p "$OUT"
 # Rendered frames with exact labels (domain-randomised renderings), and the reference frame.
-[ -f "$OUT/sim/000299_labels.png" ] || "$BIN/endo_guidance_synthetic" --write-training "$OUT/sim" --frames 300 --seed 5
-[ -f "$OUT/reference/frames/000000.png" ] || "$BIN/endo_guidance_synthetic" --write-sequence "$OUT/reference" --frames 1 >/dev/null
+if [ $TRAINING = 1 ]; then
+  [ -f "$OUT/sim/000299_labels.png" ] || "$BIN/endo_guidance_synthetic" --write-training "$OUT/sim" --frames 300 --seed 5
+  [ -f "$OUT/reference/frames/000000.png" ] || "$BIN/endo_guidance_synthetic" --write-sequence "$OUT/reference" --frames 1 >/dev/null
+fi
 
 train() {  # OUT_DIR HOLD_OUT [extra args]
   local dir="$1" hold="$2"; shift 2
@@ -63,21 +68,9 @@ score() {  # MODEL_YAML SITE
   fi
 }
 
-case "$MODE" in
-  ship)
-    mkdir -p models
-    train models "" --reference "$OUT/reference/frames/000000.png"
-    rm -f models/shaft_net.pt models.log  # (the weights stay out of the package: the ONNX file is the model)
-    ;;
-  --loso)
-    L="$OUT/loso"
-    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | sed 's/--//g' | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
-    mkdir -p "$L"
-    for site in ${SITES:-OP1 OP2 OP3 DS2}; do
-      train "$L/$site" "$site"
-      score "$L/$site/shaft_net.yaml" "$site" > "$L/$site.eval"
-    done
-    $PY - "$L" ${SITES:-OP1 OP2 OP3 DS2} <<'PY'
+# The held-out table of the sites' .eval files in a LOSO folder -> its table.md.
+table() {  # DIR SITE...
+  $PY - "$@" <<'PY'
 import re, sys, os
 d = sys.argv[1]
 rows = ["| held out | found <= 2 / 5 / 10 px | false per image (frame) | side median px | annotated axes found |", "|---|---|---|---|---|"]
@@ -94,6 +87,23 @@ for site in sys.argv[2:]:
 open(os.path.join(d, "table.md"), "w").write("\n".join(rows) + "\n")
 print("\n".join(rows))
 PY
+}
+
+case "$MODE" in
+  ship)
+    mkdir -p models
+    train models "" --reference "$OUT/reference/frames/000000.png"
+    rm -f models/shaft_net.pt models.log  # (the weights stay out of the package: the ONNX file is the model)
+    ;;
+  --loso)
+    L="$OUT/loso"
+    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | sed 's/--//g' | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
+    mkdir -p "$L"
+    for site in ${SITES:-OP1 OP2 OP3 DS2}; do
+      train "$L/$site" "$site"
+      score "$L/$site/shaft_net.yaml" "$site" > "$L/$site.eval"
+    done
+    table "$L" ${SITES:-OP1 OP2 OP3 DS2}
     ;;
   --check)
     train "$OUT/check" ""
@@ -110,5 +120,17 @@ PY
       --reference "$OUT/reference/frames/000000.png"
     cp "$OUT/reference_model/shaft_net_reference.yml.gz" models/
     ;;
-  *) echo "usage: scripts/train_shaft_net.sh [--loso|--check|--reference]" >&2; exit 2 ;;
+  --rescore)
+    L="${EXTRA[0]:-}"
+    [ -d "$L" ] || { echo "train_shaft_net.sh: --rescore needs a LOSO folder (e.g. build/training/loso)" >&2; exit 2; }
+    sites=()
+    for site in OP1 OP2 OP3 DS2; do
+      [ -f "$L/$site/shaft_net.yaml" ] || continue
+      score "$L/$site/shaft_net.yaml" "$site" > "$L/$site.eval"
+      sites+=("$site")
+    done
+    [ ${#sites[@]} -gt 0 ] || { echo "train_shaft_net.sh: no SITE/shaft_net.yaml in $L" >&2; exit 2; }
+    table "$L" "${sites[@]}"
+    ;;
+  *) echo "usage: scripts/train_shaft_net.sh [--loso|--check|--reference|--rescore DIR]" >&2; exit 2 ;;
 esac
