@@ -605,6 +605,11 @@ struct RoboticChecks {
   double min_strict_found = -1.0, max_strict_false_per_frame = -1.0;
 };
 
+// Whether a found fraction and a false rate keep their bounds (a negative bound: none).
+bool withinBounds(double found, double min_found, double false_rate, double max_false) {
+  return (min_found < 0.0 || found >= min_found) && (max_false < 0.0 || false_rate <= max_false);
+}
+
 // Returns false when a requested regression bound (per sequence) is violated.
 bool evalRobotic(fs::path const& root, std::string const& overlay_dir, SegmentationParams const& sp, RoboticChecks const& chk) {
   std::ifstream csv(root / "shaft_axis_annotations.csv");
@@ -790,7 +795,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
                   strict.shafts, covered_instrument);
     double const found_frac = static_cast<double>(found) / std::max(1, n);
     double const false_rate = static_cast<double>(false_dets) / std::max(1, frames_annot);
-    if ((chk.min_found >= 0.0 && found_frac < chk.min_found) || (chk.max_false_per_frame >= 0.0 && false_rate > chk.max_false_per_frame)) {
+    if (!withinBounds(found_frac, chk.min_found, false_rate, chk.max_false_per_frame)) {
       std::printf("  regression bounds (found >= %.2f, false/frame <= %.3f): VIOLATED\n", chk.min_found, chk.max_false_per_frame);
       ok = false;
     } else if (chk.min_found >= 0.0 || chk.max_false_per_frame >= 0.0) {
@@ -799,8 +804,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     if (chk.min_strict_found >= 0.0 || chk.max_strict_false_per_frame >= 0.0) {
       double const strict_found = static_cast<double>(strict.found.back()) / std::max(1, strict.shafts);
       double const strict_false = static_cast<double>(strict.false_detections) / std::max(1, frames_annot);
-      bool const met = !mask_caps.empty() && !(chk.min_strict_found >= 0.0 && !(strict_found >= chk.min_strict_found)) &&
-                       !(chk.max_strict_false_per_frame >= 0.0 && !(strict_false <= chk.max_strict_false_per_frame));
+      bool const met = !mask_caps.empty() && withinBounds(strict_found, chk.min_strict_found, strict_false, chk.max_strict_false_per_frame);
       std::printf("  strict regression bounds (mask shafts found >= %.2f, false/frame <= %.3f): %s\n", chk.min_strict_found,
                   chk.max_strict_false_per_frame, mask_caps.empty() ? "VIOLATED (no mask videos)" : met ? "met" : "VIOLATED");
       ok = ok && met;
