@@ -35,10 +35,12 @@ void edgeExtent(std::array<std::vector<Eigen::Vector2d>, 2> const& edges, Eigen:
 
 }  // namespace
 
-TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges) {
+TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                        std::optional<TipColours> const& tip_colours) {
   TrackedShaft s;
   s.contour = contour;
   s.edges = edges;
+  s.tip_colours = tip_colours;
   Eigen::Vector2d const dir = axisDirection(contour);
   edgeExtent(edges, contour.entry_px, dir, &s.edge_start, &s.edge_end);
   // (the detection follows each edge to its end, which can lie a fraction of a px beyond the
@@ -134,10 +136,16 @@ TrackingResult trackContour(TrackedShaft const& prev, cv::Mat const& bgr, Contou
   if (dir.dot(axisDirection(pc)) < 0.0) dir = -dir;
   Eigen::Vector2d const entry = trackedEntry(ax, dir, pc.entry_px, fov, scale);
   double const shift = dir.dot(geometry::footOnLine(ax, pc.entry_px) - entry);
-  // The tip is the detection's, held: last frame's tip moved onto the new axis.
-  double const tip_distance = dir.dot(geometry::footOnLine(ax, pc.tip_px) - entry);
-  moveExtent(prev, now, shift, tip_distance);
+  // The tip: last frame's moved onto the new axis, then located on this frame with the
+  // detection's colours where it can be.
+  double tip_distance = dir.dot(geometry::footOnLine(ax, pc.tip_px) - entry);
   c.entry_px = entry;
+  c.tip_px = entry + tip_distance * dir;
+  now.tip_colours = prev.tip_colours;
+  if (prev.tip_colours && fov && !fov->mask.empty())
+    if (auto const tip = locateTipWithColours(bgr, c, now.edges, *prev.tip_colours, fov->mask, scale))
+      tip_distance = dir.dot(geometry::footOnLine(ax, *tip) - entry);
+  moveExtent(prev, now, shift, tip_distance);
   c.tip_px = entry + tip_distance * dir;
   out.rejection = trackedShapeCheck(c, pc, p, tp);
   if (out.rejection == ContourRejection::kNone) out.shaft = std::move(now);

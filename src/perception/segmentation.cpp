@@ -130,7 +130,8 @@ void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
   if (follow && params_.tracking.detect_every > 1)
-    for (std::size_t i = 0; i < res.contours.size(); ++i) tracked_.push_back(startTrack(res.contours[i], res.edges[i]));
+    for (std::size_t i = 0; i < res.contours.size(); ++i)
+      tracked_.push_back(startTrack(res.contours[i], res.edges[i], i < res.tip_colours.size() ? res.tip_colours[i] : std::nullopt));
   tracked_size_ = frame_size;
   scale_ = res.scale;
   since_detection_ = 0;

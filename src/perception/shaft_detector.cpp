@@ -96,6 +96,7 @@ void removeDuplicateShafts(SegmentationResult& res, std::vector<std::size_t>& ke
 }
 
 void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat const* instrument) {
+  res.tip_colours.assign(res.contours.size(), std::nullopt);
   for (std::size_t i = 0; i < res.contours.size() && i < res.contour_regions.size() && i < res.edges.size(); ++i) {
     InstrumentMask mask;
     if (instrument) {
@@ -111,7 +112,9 @@ void locateTips(SegmentationResult& res, DetectionFrame const& frame, cv::Mat co
         continue;
       }
     }
-    if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], mask, frame.fov.mask, frame.scale)) {
+    TipColours colours;
+    if (auto const tip = locateTipOnFrame(frame.bgr, res.contours[i], res.edges[i], mask, frame.fov.mask, frame.scale, 20.0, &colours)) {
+      res.tip_colours[i] = colours;
       res.contours[i].tip_px = *tip;
       res.contours[i] = onImageAxis(res.contours[i]);
     }

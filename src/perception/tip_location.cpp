@@ -111,13 +111,38 @@ void flood(cv::Mat const& share, cv::Mat& reached, std::vector<cv::Point> stack)
     }
   }
 }
-}  // namespace
+// The colours where the mask (`prob`, over the window's samples) is sure of them, two of each:
+// the instrument's (a black shaft's jaws are metal), and the tissue's beside the shaft, outside
+// its lines (beyond its end, and between the lines where closed jaws continue them, the mask may
+// miss the jaws). false when either is missing or no instrument colour differs from the tissue's
+// by min_contrast.
+bool coloursOfMask(cv::Mat const& colour, cv::Mat const& prob, cv::Mat const& inside, double back, int half, double dr, double width,
+                   double min_contrast, TipColours& out) {
+  std::vector<cv::Vec3f> tissue_s, instrument_s;
+  for (int r = 0; r < colour.rows; ++r)
+    for (int k = 0; k < colour.cols; ++k) {
+      if (!inside.at<std::uint8_t>(r, k)) continue;
+      float const p = prob.at<float>(r, k);
+      if (p >= 0.8f) instrument_s.push_back(colour.at<cv::Vec3f>(r, k));
+      else if (p <= 0.2f && k <= back && std::abs(r - half) * dr > 0.5 * width) tissue_s.push_back(colour.at<cv::Vec3f>(r, k));
+    }
+  std::vector<cv::Vec3f> const tissue = twoColours(tissue_s);
+  std::vector<cv::Vec3f> tool;
+  for (cv::Vec3f const& m : twoColours(instrument_s))  // (one as the tissue's is the tissue between open jaws)
+    if (distanceTo(tissue, m) >= min_contrast) tool.push_back(m);
+  if (tissue.empty() || tool.empty()) return false;
+  out = {tissue.front(), tissue.back(), tool.front(), tool.back()};
+  return true;
+}
 
-std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
-                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
-                                                cv::Mat const& fov, int scale, double min_contrast) {
-  CV_Assert(bgr.type() == CV_8UC3 && (instrument.map.type() == CV_32F || instrument.map.type() == CV_8U) && fov.type() == CV_8U);
-  if (instrument.map.empty()) return std::nullopt;
+// locateTipOnFrame() with its colours taken from `instrument` (then set in `colours`), or with
+// `colours` as given when `instrument` is null.
+std::optional<Eigen::Vector2d> locateTip(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                         std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const* instrument,
+                                         cv::Mat const& fov, int scale, double min_contrast, TipColours& colours) {
+  CV_Assert(bgr.type() == CV_8UC3 && fov.type() == CV_8U &&
+            (!instrument || instrument->map.type() == CV_32F || instrument->map.type() == CV_8U));
+  if (instrument && instrument->map.empty()) return std::nullopt;
   geometry::ImageLine const ax = geometry::imageAxis(c);
   Eigen::Vector2d const e = geometry::footOnLine(ax, c.entry_px), to_tip = geometry::footOnLine(ax, c.tip_px) - e;
   if (!(to_tip.norm() > 1.0) || edges[0].empty() || edges[1].empty()) return std::nullopt;
@@ -155,34 +180,23 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
   double const off = 0.5 * (scale - 1);
   cv::Matx23d const to_fov(to_frame(0, 0) / scale, to_frame(0, 1) / scale, (origin.x() - off) / scale,  //
                            to_frame(1, 0) / scale, to_frame(1, 1) / scale, (origin.y() - off) / scale);
-  cv::Matx23d to_mask = to_fov;
-  to_mask(0, 2) -= instrument.origin.x;
-  to_mask(1, 2) -= instrument.origin.y;
   cv::Mat colour8, prob, inside;
   cv::warpAffine(bgr, colour8, to_frame, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
   cv::warpAffine(fov, inside, to_fov, {cols, rows}, cv::INTER_NEAREST | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
-  cv::warpAffine(instrument.map, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
-  if (prob.type() == CV_8U) prob.convertTo(prob, CV_32F, 1.0 / 255.0);
   cv::Mat colour;
   colour8.convertTo(colour, CV_32FC3);
-  // The colours where the mask is sure of them, two of each: the instrument's (a black shaft's
-  // jaws are metal), and the tissue's beside the shaft, outside its lines (beyond its end, and
-  // between the lines where closed jaws continue them, the mask may miss the jaws).
-  std::vector<cv::Vec3f> tissue_s, instrument_s;
-  for (int r = 0; r < rows; ++r)
-    for (int k = 0; k < cols; ++k) {
-      if (!inside.at<std::uint8_t>(r, k)) continue;
-      float const p = prob.at<float>(r, k);
-      if (p >= 0.8f) instrument_s.push_back(colour.at<cv::Vec3f>(r, k));
-      else if (p <= 0.2f && k <= back && std::abs(r - half) * dr > 0.5 * width) tissue_s.push_back(colour.at<cv::Vec3f>(r, k));
-    }
-  std::vector<cv::Vec3f> const tissue = twoColours(tissue_s);
-  std::vector<cv::Vec3f> tool;
-  for (cv::Vec3f const& m : twoColours(instrument_s))  // (one as the tissue's is the tissue between open jaws)
-    if (distanceTo(tissue, m) >= min_contrast) tool.push_back(m);
-  if (tissue.empty() || tool.empty()) return std::nullopt;
-  cv::Vec3f const d = tool.back() - tool.front();
-  Share const shareOf{tissue.front(), tissue.back(), tool.front(), d, d.dot(d) > 0.f ? 1.f / d.dot(d) : 0.f};
+  if (instrument) {
+    cv::Matx23d to_mask = to_fov;
+    to_mask(0, 2) -= instrument->origin.x;
+    to_mask(1, 2) -= instrument->origin.y;
+    cv::warpAffine(instrument->map, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
+    if (prob.type() == CV_8U) prob.convertTo(prob, CV_32F, 1.0 / 255.0);
+    if (!coloursOfMask(colour, prob, inside, back, half, dr, width, min_contrast, colours)) return std::nullopt;
+  } else {
+    prob = cv::Mat(rows, cols, CV_32F, cv::Scalar(1.f));  // (the seeds: the colours alone decide)
+  }
+  cv::Vec3f const d = colours.tool1 - colours.tool0;
+  Share const shareOf{colours.tissue0, colours.tissue1, colours.tool0, d, d.dot(d) > 0.f ? 1.f / d.dot(d) : 0.f};
   // The instrument: the samples of share over one half connected (4-neighbours) to the shaft's end.
   cv::Mat planes[3], share(rows, cols, CV_32F), reached = cv::Mat::zeros(rows, cols, CV_8U);
   cv::split(colour, planes);
@@ -228,6 +242,24 @@ std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::Ap
     if (t > best) best = t, best_row = r;
   }
   return at(best, (best_row - half) * dr);
+}
+
+}  // namespace
+
+std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                                std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
+                                                cv::Mat const& fov, int scale, double min_contrast, TipColours* colours) {
+  TipColours taken;
+  auto const tip = locateTip(bgr, c, edges, &instrument, fov, scale, min_contrast, taken);
+  if (tip && colours) *colours = taken;
+  return tip;
+}
+
+std::optional<Eigen::Vector2d> locateTipWithColours(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                                    std::array<std::vector<Eigen::Vector2d>, 2> const& edges, TipColours const& colours,
+                                                    cv::Mat const& fov, int scale) {
+  TipColours given = colours;
+  return locateTip(bgr, c, edges, nullptr, fov, scale, 0.0, given);
 }
 
 }  // namespace endo_guidance::perception

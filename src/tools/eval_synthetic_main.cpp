@@ -18,6 +18,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <map>
 #include <cstdio>
 #include <cstring>
 #include <limits>
@@ -86,6 +87,9 @@ struct Result {
   int cut = 0, cut_found = 0;  // shafts with a contour line (nearly) out of view, and those found
   std::vector<double> line_px, dir_deg, dist_rel, trocar_mm, latency_ms;
   std::vector<double> tip_signed, tip_abs;  // detection frames: the tip along the axis to the jaws' end (px, + beyond)
+  std::vector<double> tracked_tip_signed, tracked_tip_abs;  // ... tracked frames
+  std::map<int, std::pair<int, double>> last_tip;  // per instrument: the last frame it was found in, its tip error there
+  std::vector<double> tip_step;                    // |change of the tip error| from one frame to the next (px)
   std::vector<double> dist_signed, line_signed;  // (estimate - truth) / truth; line offset outward (px) at mid-shaft
   std::vector<double> hsv_ratio;  // --baseline: its cost over one HSV conversion, per frame
   std::vector<std::vector<double>> trocar_after_100;  // per instrument: nearest estimate's error (mm) in each frame from 100 on
@@ -169,9 +173,13 @@ Result run(Scene const& s, int frames, bool overlay, std::vector<int> const& ove
       }
       ++R.found;
       auto const& c = out.segmentation.contours[best];
-      if (!out.segmentation.tracked) {
-        R.tip_signed.push_back((v.truth.tip_px - v.truth.entry_px).normalized().dot(c.tip_px - SceneRenderer::visibleTip(v, k)));
-        R.tip_abs.push_back(std::abs(R.tip_signed.back()));
+      {
+        auto& sgn = out.segmentation.tracked ? R.tracked_tip_signed : R.tip_signed;
+        sgn.push_back((v.truth.tip_px - v.truth.entry_px).normalized().dot(c.tip_px - SceneRenderer::visibleTip(v, k)));
+        (out.segmentation.tracked ? R.tracked_tip_abs : R.tip_abs).push_back(std::abs(sgn.back()));
+        auto const last = R.last_tip.find(v.instrument);
+        if (last != R.last_tip.end() && last->second.first == k - 1) R.tip_step.push_back(std::abs(sgn.back() - last->second.second));
+        R.last_tip[v.instrument] = {k, sgn.back()};
       }
       for (int l = 0; l < 2; ++l) R.line_px.push_back(lineError(c.lines[l], v.truth.lines[l], v.truth.entry_px, v.truth.tip_px));
       for (int l = 0; l < 2; ++l) {
@@ -420,6 +428,14 @@ int main(int argc, char** argv) {
     if (!r.tip_abs.empty())
       std::printf("  %s: tip (the jaws' end) along the axis, %zu detections: p50 %+.2f px (+ beyond), |error| p50 %.2f p95 %.2f px\n",
                   s.name.c_str(), r.tip_abs.size(), percentile(r.tip_signed, 0.5), percentile(r.tip_abs, 0.5), percentile(r.tip_abs, 0.95));
+    if (!r.tracked_tip_abs.empty())
+      std::printf("  %s: tip on the tracked frames, %zu: p50 %+.2f px, |error| p50 %.2f p95 %.2f px\n", s.name.c_str(),
+                  r.tracked_tip_abs.size(), percentile(r.tracked_tip_signed, 0.5), percentile(r.tracked_tip_abs, 0.5),
+                  percentile(r.tracked_tip_abs, 0.95));
+    if (!r.tip_step.empty())
+      std::printf("  %s: the tip error's change from frame to frame, %zu: p95 %.2f p99 %.2f px, %ld over 10 px\n", s.name.c_str(),
+                  r.tip_step.size(), percentile(r.tip_step, 0.95), percentile(r.tip_step, 0.99),
+                  static_cast<long>(std::count_if(r.tip_step.begin(), r.tip_step.end(), [](double d) { return d > 10.0; })));
     if (!r.dir_through.empty())
       std::printf("  %s: through the insertion point (%zu shafts attached to a located one): direction p50 %.3f° p95 %.3f°, distance p50 %.3f %%"
                   " (the same axes alone: %.3f° / %.3f°, %.3f %%)\n",

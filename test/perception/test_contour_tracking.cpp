@@ -3,7 +3,9 @@
 // against exact synthetic geometry: a grey bar (the shaft) on red tissue with known edges.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
@@ -81,38 +83,31 @@ TEST(ContourTracking, FollowsAPivotingShaftBetweenDetections) {
   }
 }
 
-// The tip is measured by the detection only and held between (trackContour()): pushed in 12 px
-// per frame, then pulled back 16 px per frame, with a detection every 4 frames, a tracked frame
-// reports the last detection's tip (on its own axis), a detection frame the shaft's end.
-TEST(ContourTracking, TheTipIsHeldBetweenDetectionsAndMeasuredAtEach) {
+// The tip is located on every frame, tracked ones too (trackContour()): pushed in 12 px per frame,
+// then pulled back 16 px per frame, with a detection every 4 frames, each frame reports the
+// shaft's end (a tip held from the last detection would be up to 48 px off).
+TEST(ContourTracking, TheTipIsMeasuredOnTrackedFramesAsOnDetections) {
   SegmentationParams p = colourParams();
   p.tracking.detect_every = 4;
   InstrumentSegmenter seg(p);
   std::vector<double> ends;
   for (int k = 0; k < 8; ++k) ends.push_back(300.0 - 12.0 * k);
   for (int k = 1; k < 7; ++k) ends.push_back(204.0 + 16.0 * k);
-  std::optional<Eigen::Vector2d> detected;
   int tracked = 0;
   for (std::size_t k = 0; k < ends.size(); ++k) {
     Eigen::Vector2d const b(320.0, ends[k]);
     auto const res = seg.process(bar(Eigen::Vector2d(320.0, 700.0), b));
     ASSERT_EQ(res.contours.size(), 1u) << k;
     Eigen::Vector2d const tip = res.contours[0].tip_px;
-    if (!res.tracked) {
-      EXPECT_LT((tip - b).norm(), 3.0) << k << ": tip " << tip.transpose();
-      detected = tip;
-    } else {
-      ++tracked;
-      ASSERT_TRUE(detected);
-      EXPECT_LT((tip - *detected).norm(), 0.5) << k << ": tip " << tip.transpose() << " held from " << detected->transpose();
-    }
+    EXPECT_LT((tip - b).norm(), 3.0) << k << (res.tracked ? " (tracked)" : "") << ": tip " << tip.transpose();
+    tracked += res.tracked;
   }
   EXPECT_GE(tracked, 8);
 }
 
 // A pale, achromatic band (membrane) continues the shaft beyond its end, narrower than it: its
 // chroma is as low as the metal's, but beyond the straight sides only 2.5 widths may follow in
-// the detection, whose tip the tracked frames hold.
+// the detection and in the tracked frames alike.
 TEST(ContourTracking, TheTipDoesNotRunAlongAPaleMembrane) {
   SegmentationParams p = colourParams();
   p.tracking.detect_every = 20;
@@ -192,9 +187,50 @@ TEST(ContourTracking, RefusesAWidthJumpAndAShaftThatLeftItsLines) {
   EXPECT_EQ(moved.rejection, ContourRejection::kWeakEdges);
 }
 
-// A still image of the rendered scene with 12 mm jaws (as the simulator draws them): the tracked
-// tips stay where the detection put them.
-TEST(ContourTracking, TheTrackedTipHoldsTheDetectedTipOnAStillImage) {
+// The rendered scene in motion, 12 mm jaws, one detection every 8 frames (the learned detector:
+// the colour method's region takes few of the jaws here): on the tracked frames the tip, located
+// with the detection's colours, follows the jaws' end, where the last detection's tip held lags
+// it (a detection that could not locate its tip on the frame leaves it held).
+TEST(ContourTracking, TheTrackedTipFollowsTheJawsInTheRenderedScene) {
+  SyntheticSceneOptions so;
+  SyntheticScene scene(defaultInstruments(), so);
+  SceneRenderer renderer(so.width, so.height, RenderOptions{});
+  SegmentationParams p;
+  p.detector = SegmentationParams::Detector::kLearned;
+  p.tracking.detect_every = 8;
+  InstrumentSegmenter seg(p);
+  std::map<int, Eigen::Vector2d> detected;  // per instrument: the last detection's tip
+  std::vector<double> located, held;
+  for (int k = 0; k < 160; ++k) {
+    auto const views = scene.frame(k);
+    auto const res = seg.process(renderer.render(views, k));
+    for (auto const& c : res.contours)
+      for (auto const& v : views) {
+        Eigen::Vector3d const ta = imageAxis(v.truth);
+        if (std::abs(ta.dot(c.entry_px.homogeneous())) > 3.0 || std::abs(ta.dot(c.tip_px.homogeneous())) > 3.0) continue;
+        Eigen::Vector2d const truth = SceneRenderer::visibleTip(v, k);
+        if (!res.tracked) {
+          detected[v.instrument] = c.tip_px;
+        } else if (detected.count(v.instrument)) {
+          located.push_back((c.tip_px - truth).norm());
+          held.push_back((footOnLine(ta, detected[v.instrument]) - truth).norm());
+        }
+      }
+  }
+  ASSERT_GE(located.size(), 60u);
+  int better = 0, worse = 0;
+  for (std::size_t i = 0; i < located.size(); ++i) better += located[i] + 2.0 < held[i], worse += located[i] > held[i] + 1.0;
+  // (measured: 238 better by over 2 px, 17 worse by over 1 px, of 420)
+  EXPECT_GE(better, static_cast<int>(located.size()) / 3) << "of " << located.size();
+  EXPECT_LE(worse, static_cast<int>(located.size()) / 10) << "of " << located.size();
+  std::sort(located.begin(), located.end());
+  std::sort(held.begin(), held.end());
+  EXPECT_LT(located[located.size() / 2], 0.5 * held[held.size() / 2]);
+}
+
+// A still image of the rendered scene with 12 mm jaws (as the simulator draws them): the tips
+// located on the tracked frames are where the detection put them.
+TEST(ContourTracking, TheTrackedTipIsTheDetectedTipOnAStillImage) {
   SyntheticSceneOptions so;
   SyntheticScene scene(defaultInstruments(), so);
   SceneRenderer renderer(so.width, so.height, RenderOptions{});

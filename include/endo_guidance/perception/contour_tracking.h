@@ -10,6 +10,7 @@
 #include "endo_guidance/geometry/apparent_contour.h"
 #include "endo_guidance/perception/contour_fit.h"
 #include "endo_guidance/perception/field_of_view.h"
+#include "endo_guidance/perception/tip_location.h"
 
 namespace endo_guidance::perception {
 
@@ -32,18 +33,21 @@ struct TrackedShaft {
   double edge_start = 0.0;    ///< full-res px from the entry along the axis: where the fitted edges begin
   double edge_end = 0.0;      ///< ... and end (at most the detection's: see trackContour)
   double detected_edge_end = 0.0;  ///< ... where the detection's edges ended
+  std::optional<TipColours> tip_colours;  ///< the colours the detection located the tip with (nullopt: the tip is held)
 };
 
 /// The tracked state of a shaft found by the detection (its contour and edge points).
-TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges);
+TrackedShaft startTrack(geometry::ApparentContour const& contour, std::array<std::vector<Eigen::Vector2d>, 2> const& edges,
+                        std::optional<TipColours> const& tip_colours = std::nullopt);
 
 /// Contour tracking: the shaft of the previous frame found again in `bgr` (full resolution)
 /// without segmenting it. Each contour line is refined as in refineContour() -- a wide sub-pixel
 /// pass about last frame's line, then a narrow one about its result -- over the extent of the
 /// edges fitted at the detection (cut at the tip). The entry moves to where the new axis
-/// leaves the field of view; the tip is the detection's, held (last frame's moved onto the new
-/// axis): only a detection frame measures it, so that the tip a servo sees comes from one
-/// estimator, at most detect_every - 1 frames old. Refused (nullopt, with the reason) when a
+/// leaves the field of view; the tip is located on the frame with the colours the detection
+/// located it with (locateTipWithColours()), so that a servo moving the instrument in depth sees
+/// it move between detections, by the same measure; where it cannot be located (or the detection
+/// did not locate it), last frame's tip moved onto the new axis stands. Refused (nullopt, with the reason) when a
 /// side has too few edge points or too large a residual, the lines diverge or cross, or the
 /// width jumps: the caller then runs the full detection.
 struct TrackingResult {

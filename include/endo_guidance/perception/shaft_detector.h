@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "endo_guidance/perception/region_growing.h"
 #include "endo_guidance/perception/seed_search.h"
 #include "endo_guidance/perception/segmentation_params.h"
+#include "endo_guidance/perception/tip_location.h"
 
 // The shaft-detector seam (docs/architecture.md): a detector proposes shaft candidates (a region
 // or a strip entering the view, with its side pair: SideFit); the one contour fit
@@ -33,6 +35,9 @@ struct SegmentationResult {
   std::vector<Region> regions;            ///< processing-scale pixels
   std::vector<ContourRejection> region_status;  ///< per region: kNone = accepted
   std::vector<std::size_t> contour_regions;     ///< per contour: its region in `regions` (empty when tracked)
+  /// Per contour (after locateTips()): the colours its tip was located with, which the tracked
+  /// frames locate it with (nullopt: not located on the frame).
+  std::vector<std::optional<TipColours>> tip_colours;
   int scale = 1;                          ///< processing -> full resolution factor
   /// The shafts were followed from the last frame's lines (contour_tracking.h), without the
   /// detection: seeds and regions are empty then.

@@ -18,6 +18,12 @@ struct InstrumentMask {
   cv::Point origin;
 };
 
+/// The colours a tip was located with (locateTipOnFrame()): the tissue's two beside the shaft and
+/// the instrument's, from `tool0` to `tool1` (the same twice when it has one).
+struct TipColours {
+  cv::Vec3f tissue0, tissue1, tool0, tool1;
+};
+
 /// The tip (the jaws' end) of a fitted contour located on the full-resolution frame, from a
 /// coarse mask of the instrument (a network's at 160 x 128, or a region grown at half resolution):
 /// such a mask stops a few of its own pixels short of thin jaws, and joins the jaws of two
@@ -32,9 +38,15 @@ struct InstrumentMask {
 ///
 /// `edges`: the contour's edge points per line (ContourFit::edges: the shaft's end is where the
 /// shorter line ends); `fov`: the field of view's mask at the processing scale, `scale`: processing
-/// to full resolution.
+/// to full resolution; `colours` (optional): set to the colours it took when it located the tip.
 std::optional<Eigen::Vector2d> locateTipOnFrame(cv::Mat const& bgr, geometry::ApparentContour const& c,
                                                 std::array<std::vector<Eigen::Vector2d>, 2> const& edges, InstrumentMask const& instrument,
-                                                cv::Mat const& fov, int scale, double min_contrast = 20.0);
+                                                cv::Mat const& fov, int scale, double min_contrast = 20.0, TipColours* colours = nullptr);
+
+/// The same with the colours a detection took (a tracked frame has no mask to take them from):
+/// the instrument is what those colours call it from between the lines at the shaft's end on.
+std::optional<Eigen::Vector2d> locateTipWithColours(cv::Mat const& bgr, geometry::ApparentContour const& c,
+                                                    std::array<std::vector<Eigen::Vector2d>, 2> const& edges, TipColours const& colours,
+                                                    cv::Mat const& fov, int scale);
 
 }  // namespace endo_guidance::perception
