@@ -74,7 +74,7 @@ void InstrumentSegmenter::reset() {
 }
 
 std::optional<SegmentationResult> InstrumentSegmenter::track(cv::Mat const& bgr) {
-  if (tracked_.empty() || bgr.size() != tracked_size_ || since_detection_ + 1 >= params_.tracking.detect_every) return std::nullopt;
+  if (tracked_.empty() || bgr.size() != tracked_size_ || since_detection_ + 1 >= detectEvery()) return std::nullopt;
   std::vector<TrackedShaft> now;
   for (TrackedShaft const& t : tracked_) {
     TrackingResult r = trackContour(t, bgr, params_.contours, params_.tracking, &fov_, scale_);
@@ -129,7 +129,7 @@ SegmentationResult InstrumentSegmenter::process(cv::Mat const& bgr, std::vector<
 void InstrumentSegmenter::startTracks(SegmentationResult const& res, bool follow, cv::Size frame_size) {
   // The shafts found are followed in the next frames (contour_tracking.h).
   tracked_.clear();
-  if (follow && params_.tracking.detect_every > 1)
+  if (follow && detectEvery() > 1)
     for (std::size_t i = 0; i < res.contours.size(); ++i)
       tracked_.push_back(startTrack(res.contours[i], res.edges[i], i < res.tip_colours.size() ? res.tip_colours[i] : std::nullopt));
   tracked_size_ = frame_size;

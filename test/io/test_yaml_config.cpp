@@ -58,7 +58,7 @@ TEST(YamlConfig, PipelineParamsAndTheShippedDefaults) {
   // Values the stages cannot work with are refused with the key's name (a zero processing width
   // divided by zero in the segmentation).
   for (char const* bad : {"radius: 0\n", "radius: -0.004\n", "segmentation:\n  processing_width: 0\n",
-                          "segmentation:\n  sigma_radius: -1\n", "segmentation:\n  detect_every: 0\n", "segmentation:\n  resought_min_entry_sine: 1.5\n",
+                          "segmentation:\n  sigma_radius: -1\n", "segmentation:\n  detect_every: -1\n", "segmentation:\n  resought_min_entry_sine: 1.5\n",
                           "segmentation:\n  resought_min_tip_depth_px: -1\n",
                           "segmentation:\n  resought_max_widening: 0.5\n",
                           "segmentation:\n  strip_full_res_outside_quantile: 1.5\n",

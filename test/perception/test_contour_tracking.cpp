@@ -159,6 +159,22 @@ TEST(ContourTracking, DetectEveryFrameNeverTracks) {
   }
 }
 
+// detect_every 0 (the default) is the detector's own cadence: the colour method every frame (its
+// tracked false shafts would stay), the learned detector's network every 8th; a value set wins.
+TEST(ContourTracking, TheDefaultCadenceIsTheDetectorsOwn) {
+  SegmentationParams colour = colourParams();
+  colour.tracking.detect_every = 0;
+  InstrumentSegmenter seg(colour);
+  EXPECT_EQ(seg.detectEvery(), 1);
+  for (int k = 0; k < 4; ++k) EXPECT_FALSE(seg.process(bar(kPivot, endAt(k))).tracked) << k;
+  SegmentationParams learned;
+  learned.detector = SegmentationParams::Detector::kLearned;
+  EXPECT_EQ(learned.tracking.detect_every, 0);
+  EXPECT_EQ(InstrumentSegmenter(learned).detectEvery(), 8);
+  learned.tracking.detect_every = 3;
+  EXPECT_EQ(InstrumentSegmenter(learned).detectEvery(), 3);
+}
+
 TEST(ContourTracking, RefusesAWidthJumpAndAShaftThatLeftItsLines) {
   SegmentationParams p = colourParams();
   InstrumentSegmenter seg(p);
@@ -187,8 +203,9 @@ TEST(ContourTracking, RefusesAWidthJumpAndAShaftThatLeftItsLines) {
   EXPECT_EQ(moved.rejection, ContourRejection::kWeakEdges);
 }
 
-// The rendered scene in motion, 12 mm jaws, one detection every 8 frames (the learned detector:
-// the colour method's region takes few of the jaws here): on the tracked frames the tip, located
+// The rendered scene in motion, 12 mm jaws, the learned detector's own cadence (the default: one
+// detection every 8 frames; the colour method's region takes few of the jaws here): on the
+// tracked frames the tip, located
 // with the detection's colours, follows the jaws' end, where the last detection's tip held lags
 // it (a detection that could not locate its tip on the frame leaves it held).
 TEST(ContourTracking, TheTrackedTipFollowsTheJawsInTheRenderedScene) {
@@ -197,7 +214,6 @@ TEST(ContourTracking, TheTrackedTipFollowsTheJawsInTheRenderedScene) {
   SceneRenderer renderer(so.width, so.height, RenderOptions{});
   SegmentationParams p;
   p.detector = SegmentationParams::Detector::kLearned;
-  p.tracking.detect_every = 8;
   InstrumentSegmenter seg(p);
   std::map<int, Eigen::Vector2d> detected;  // per instrument: the last detection's tip
   std::vector<double> located, held;

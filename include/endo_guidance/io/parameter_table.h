@@ -131,8 +131,9 @@ void forEachPipelineParam(pipeline::PipelineParams& p, F&& f) {
     S.resought_max_widening);
   f(ParamInfo{"segmentation/crossing_seeds", 0, 1, "", L::kSegmentation,
               "also seed on the edge of a shaft found that a refused region touches"}, S.crossing_seeds);
-  f(ParamInfo{"segmentation/detect_every", 1, 30, "frames", L::kSegmentation,
-              "full detection this often; the shafts found are tracked between (1: every frame)"}, S.tracking.detect_every);
+  f(ParamInfo{"segmentation/detect_every", 0, 30, "frames", L::kSegmentation,
+              "full detection this often; the shafts found are tracked between (1: every frame; 0: the detector's own, learned 8, colour 1)"},
+    S.tracking.detect_every);
   f(ParamInfo{"segmentation/track_max_width_change", 0, 10, "", L::kNo,
               "a tracked shaft's relative width change per frame (+2 px) beyond which it is lost"},
     S.tracking.max_width_change);

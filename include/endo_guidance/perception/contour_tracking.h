@@ -17,10 +17,10 @@ namespace endo_guidance::perception {
 struct ContourTrackingParams {
   /// Frames: the full detection (seeds, regions, line pairs) runs this often; in the frames
   /// between, each shaft found is refined directly from its lines of the frame before. A shaft
-  /// that cannot be followed makes that frame a detection frame at once. 1 (default): detect
-  /// every frame. 4 makes the pipeline about 1.65x faster (see docs/performance.md for its accuracy):
-  /// opt-in.
-  int detect_every = 1;
+  /// that cannot be followed makes that frame a detection frame at once. 1: detect every frame;
+  /// 0 (default): the detector's own cadence (ShaftDetector::detectEvery(): the learned
+  /// detector's network every 8th frame, the colour method every frame; docs/performance.md).
+  int detect_every = 0;
   double max_width_change = 0.25;  ///< the shaft's width at the entry may change this much (relative, plus 2 px) per frame
   double coarse_step_px = 6.0;     ///< full-res: profile spacing of the wide pass (the narrow one uses refine_step_px)
 };

@@ -21,8 +21,9 @@ std::unique_ptr<ShaftDetector> makeShaftDetector(SegmentationParams const& param
 
 /// Instrument segmentation of a stream: the frame reduced to the processing scale, its field of
 /// view, one shaft detector (shaft_detector.h: the colour method of [Doignon07] Sec. 3 or the
-/// learned mask), and, with tracking.detect_every > 1 (opt-in), the shafts found followed by
-/// contour tracking between detection frames (a lost one makes the frame a detection frame). Not
+/// learned mask), and, when it detects less often than every frame (detectEvery()), the shafts
+/// found followed by contour tracking between detection frames (a lost one makes the frame a
+/// detection frame). Not
 /// thread-safe (one instance per stream); call reset() between unrelated images.
 class InstrumentSegmenter {
  public:
@@ -46,6 +47,8 @@ class InstrumentSegmenter {
   /// Forgets the previous frames (tracked shafts, the detector's memory, field of view).
   void reset();
   SegmentationParams const& params() const { return params_; }
+  /// The cadence in use: tracking.detect_every, or the detector's own when that is 0.
+  int detectEvery() const { return params_.tracking.detect_every > 0 ? params_.tracking.detect_every : detector_->detectEvery(); }
   FieldOfView const& fieldOfView() const { return fov_; }
   /// Intermediate images of the last frame (processing scale), for debugging and overlays.
   cv::Mat const& feature() const { return detector_->feature(); }

@@ -70,6 +70,9 @@ class ShaftDetector {
   virtual SegmentationResult detect(DetectionFrame const& frame) = 0;
   /// Whether the shafts of the last detect() may be followed by contour tracking.
   virtual bool followable() const = 0;
+  /// Its own cadence (ContourTrackingParams::detect_every 0): a full detection this often, the
+  /// shafts followed between. 1: every frame.
+  virtual int detectEvery() const { return 1; }
   /// Contour tracking moved shaft `i` of the last detect() by `shift` (processing px) since the
   /// frame before: a detector with a memory of where shafts were moves it along.
   virtual void shaftMoved(std::size_t i, cv::Point shift) {}
