@@ -192,8 +192,6 @@ std::optional<Eigen::Vector2d> locateTip(cv::Mat const& bgr, geometry::ApparentC
     cv::warpAffine(instrument->map, prob, to_mask, {cols, rows}, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT, cv::Scalar(0));
     if (prob.type() == CV_8U) prob.convertTo(prob, CV_32F, 1.0 / 255.0);
     if (!coloursOfMask(colour, prob, inside, back, half, dr, width, min_contrast, colours)) return std::nullopt;
-  } else {
-    prob = cv::Mat(rows, cols, CV_32F, cv::Scalar(1.f));  // (the seeds: the colours alone decide)
   }
   cv::Vec3f const d = colours.tool1 - colours.tool0;
   Share const shareOf{colours.tissue0, colours.tissue1, colours.tool0, d, d.dot(d) > 0.f ? 1.f / d.dot(d) : 0.f};
@@ -205,7 +203,8 @@ std::optional<Eigen::Vector2d> locateTip(cv::Mat const& bgr, geometry::ApparentC
   std::vector<cv::Point> stack;
   for (int r = 0; r < rows; ++r)
     for (int k = 0; k <= back; ++k)
-      if (share.at<float>(r, k) > 0.5f && std::abs(r - half) * dr <= 0.35 * width && prob.at<float>(r, k) >= 0.8f) {  // the shaft's end
+      // the shaft's end (where the mask is sure of it; without a mask, the colours alone decide)
+      if (share.at<float>(r, k) > 0.5f && std::abs(r - half) * dr <= 0.35 * width && (!instrument || prob.at<float>(r, k) >= 0.8f)) {
         reached.at<std::uint8_t>(r, k) = 1;
         stack.emplace_back(k, r);
       }

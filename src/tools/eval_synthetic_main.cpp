@@ -18,10 +18,10 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <map>
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
