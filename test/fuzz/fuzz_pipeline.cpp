@@ -34,7 +34,7 @@ Knob const kKnobs[] = {{"radius", 0.0005, 0.02, false},
                        {"segmentation/min_length_px", 0, 400, false},
                        {"segmentation/min_width_px", 0, 100, false},
                        {"segmentation/max_residual_px", 0, 20, false},
-                       {"segmentation/detect_every", 1, 8, true},
+                       {"segmentation/detect_every", 0, 8, true},  // (0: the detector's own cadence)
                        {"segmentation/full_search_every", 1, 10, true},
                        {"segmentation/strip_search", 0, 1, true},
                        {"segmentation/crossing_seeds", 0, 1, true},
