@@ -205,9 +205,9 @@ TEST(ContourTracking, RefusesAWidthJumpAndAShaftThatLeftItsLines) {
 
 // The rendered scene in motion, 12 mm jaws, the learned detector's own cadence (the default: one
 // detection every 8 frames; the colour method's region takes few of the jaws here): on the
-// tracked frames the tip, located
-// with the detection's colours, follows the jaws' end, where the last detection's tip held lags
-// it (a detection that could not locate its tip on the frame leaves it held).
+// tracked frames the tip, located with the detection's colours, follows the jaws' end, where the
+// last detection's tip held lags it (a detection that could not locate its tip on the frame
+// leaves it held).
 TEST(ContourTracking, TheTrackedTipFollowsTheJawsInTheRenderedScene) {
   SyntheticSceneOptions so;
   SyntheticScene scene(defaultInstruments(), so);
