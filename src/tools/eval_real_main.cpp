@@ -718,7 +718,22 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
         }
         if (masks_ok) {
           std::vector<cv::Mat> components;
-          strict += scoreStrict(roboticMaskShafts(mask_frames, net ? &components : nullptr), r.contours);
+          std::vector<MaskShaft> const ms = roboticMaskShafts(mask_frames, net ? &components : nullptr);
+          StrictScore const sc = scoreStrict(ms, r.contours);
+          strict += sc;
+          if (verbose) {  // each mask shaft missed and each false detection at 10 px
+            for (std::size_t i = 0; i < ms.size(); ++i)
+              if (sc.match[i] < 0) {
+                double best = std::numeric_limits<double>::infinity();
+                for (auto const& c : r.contours) best = std::min(best, endo_guidance::tools::findCost(ms[i], c));
+                std::printf("  strict miss ds%d frame %d: a mask shaft of %d px (sides of %zu and %zu px), the nearest detection's "
+                            "larger side median %.1f px\n", ds, frame, ms[i].pixels, ms[i].sides[0].size(), ms[i].sides[1].size(), best);
+              }
+            for (std::size_t d = 0; d < r.contours.size(); ++d)
+              if (std::find(sc.match.begin(), sc.match.end(), static_cast<int>(d)) == sc.match.end())
+                std::printf("  strict false ds%d frame %d: entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.contours[d].entry_px.x(),
+                            r.contours[d].entry_px.y(), r.contours[d].tip_px.x(), r.contours[d].tip_px.y());
+          }
           if (net) {  // the network's cover of each, as for the stills
             NetworkMasks const nm(net->probabilities(im), cv::Size(im.cols / r.scale, im.rows / r.scale), im.size());
             for (cv::Mat const& m : components) {
