@@ -24,6 +24,7 @@ constexpr double kBeyondPx = 3.0;     // where the instrument goes on this far o
 constexpr double kMinFacingCos = 0.5; // a part's side points face its axis within 60 deg (not its ends)
 constexpr double kPartInStrip = 0.9;   // a part that is one shaft lies this much between its sides
 constexpr double kPartMaxAngleDeg = 35.0;  // between a part's own sides (the annotated stills' p95: 33 deg)
+constexpr double kAtEdgePx = 5.0;      // a side's end this far inside the margin is at the view's edge
 
 struct Edgel {
   Eigen::Vector2d x;
@@ -35,14 +36,8 @@ struct Edgel {
 struct Side {
   Eigen::Vector2d n;  // unit normal into the mask
   double rho = 0.0;   // n . x = rho on the line
-  double t0 = 0.0, t1 = 0.0;  // extent along (-n.y, n.x)
   std::vector<Eigen::Vector2d> points;
   Eigen::Vector2d along() const { return {-n.y(), n.x()}; }
-  void setExtent() {
-    t0 = std::numeric_limits<double>::infinity();
-    t1 = -t0;
-    for (auto const& q : points) t0 = std::min(t0, along().dot(q)), t1 = std::max(t1, along().dot(q));
-  }
 };
 
 // The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient and
@@ -149,7 +144,6 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
   }
   side.n = n;
   fitTls(side.points, side.n, side.rho);
-  side.setExtent();
   return true;
 }
 
@@ -160,37 +154,65 @@ double median(std::vector<double> v) {
 }
 
 // Sides a and b as a shaft: facing, overlapping, apart and with mask between them. The pair with
-// its support, width and the ends of the overlap on its axis; support 0 when they are none.
-MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, double cos_max_angle, int min_points,
-                       double min_width, double min_fill) {
+// its support, width and the ends of the overlap on its axis; support 0 when they are none. With
+// `fov` (a mask part's own sides), the sides of a stub that both run into the view's edge face
+// each other up to the farther one; without (the Hough's sides, which may run along a tool's head
+// to the border), the overlap ends where either side does.
+MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, FieldOfView const* fov, double cos_max_angle,
+                       int min_points, double min_width, double min_fill) {
   MaskLinePair p;
   if (a.n.dot(b.n) > -cos_max_angle) return p;
   Eigen::Vector2d const u = a.along();
-  double lo = a.t0, hi = a.t1, blo = 1e300, bhi = -1e300;
-  for (auto const& q : b.points) blo = std::min(blo, u.dot(q)), bhi = std::max(bhi, u.dot(q));
-  lo = std::max(lo, blo), hi = std::min(hi, bhi);
-  if (hi - lo < min_points) return p;
+  // Each side's extent along u, and whether its ends there are at the view's edge.
+  auto extent = [&](Side const& s, double& t0, double& t1, bool& edge0, bool& edge1) {
+    Eigen::Vector2d q0 = s.points.front(), q1 = q0;
+    for (auto const& q : s.points) {
+      if (u.dot(q) < u.dot(q0)) q0 = q;
+      if (u.dot(q) > u.dot(q1)) q1 = q;
+    }
+    t0 = u.dot(q0), t1 = u.dot(q1);
+    edge0 = fov && depthAt(*fov, q0) <= kEdgeMarginPx + kAtEdgePx, edge1 = fov && depthAt(*fov, q1) <= kEdgeMarginPx + kAtEdgePx;
+  };
+  double alo, ahi, blo, bhi;
+  bool ae0, ae1, be0, be1;
+  extent(a, alo, ahi, ae0, ae1);
+  extent(b, blo, bhi, be0, be1);
+  double lo = std::max(alo, blo), hi = std::min(ahi, bhi);  // where the two face each other
+  if (hi <= lo) return p;
   std::vector<double> wb, wa;
-  for (auto const& q : b.points)
-    if (double const t = u.dot(q); t >= lo && t <= hi) wb.push_back(a.n.dot(q) - a.rho);
-  for (auto const& q : a.points)
-    if (double const t = u.dot(q); t >= lo && t <= hi) wa.push_back(b.n.dot(q) - b.rho);
-  if (wa.size() < 3 || wb.size() < 3) return p;
-  double const w = median(wb), w2 = median(wa);
-  // (sides that face each other over less than half their distance are a blob's, or the two ends
-  // of a shaft's piece)
-  if (!(w >= min_width && w2 >= min_width) || hi - lo < 0.5 * std::max(w, w2)) return p;
-  // The strip between them: samples at 20 stations along, 5 across (its middle 60 %).
+  auto widths = [&](double& w, double& w2) {  // each side's median distance from the other's line
+    wb.clear(), wa.clear();
+    for (auto const& q : b.points)
+      if (double const t = u.dot(q); t >= lo && t <= hi) wb.push_back(a.n.dot(q) - a.rho);
+    for (auto const& q : a.points)
+      if (double const t = u.dot(q); t >= lo && t <= hi) wa.push_back(b.n.dot(q) - b.rho);
+    w = median(wb), w2 = median(wa);
+    return wa.size() >= 3 && wb.size() >= 3;
+  };
+  double w = 0.0, w2 = 0.0;
+  bool measured = hi - lo >= min_points && widths(w, w2);
+  // Sides that face each other over less than half their distance are a blob's, or the two ends
+  // of a shaft's piece; unless both run into the view's edge there: the view cut them, not the
+  // shaft (a stub entering obliquely across the border), and they face each other up to the farther.
+  if ((!measured || hi - lo < 0.5 * std::max(w, w2)) && ((ae0 && be0) || (ae1 && be1))) {
+    if (ae0 && be0) lo = std::min(alo, blo);
+    if (ae1 && be1) hi = std::max(ahi, bhi);
+    measured = hi - lo >= min_points && widths(w, w2);
+  }
+  if (!measured || !(w >= min_width && w2 >= min_width) || hi - lo < 0.5 * std::max(w, w2)) return p;
+  // The strip between them in the view: samples at 20 stations along, 5 across (its middle 60 %).
   int inside = 0, total = 0;
   for (int i = 0; i < 20; ++i)
     for (int j = 0; j < 5; ++j) {
       double const t = lo + (hi - lo) * i / 19.0, f = 0.2 + 0.15 * j;
       Eigen::Vector2d const x = u * t + a.n * (a.rho + f * w);
       int const xi = static_cast<int>(std::lround(x.x())), yi = static_cast<int>(std::lround(x.y()));
+      bool const in_view = fov ? insideView(*fov, x) : xi >= 0 && yi >= 0 && xi < smooth.cols && yi < smooth.rows;
+      if (!in_view) continue;
       ++total;
-      if (xi >= 0 && yi >= 0 && xi < smooth.cols && yi < smooth.rows && smooth.at<float>(yi, xi) >= 0.5f) ++inside;
+      if (smooth.at<float>(yi, xi) >= 0.5f) ++inside;
     }
-  double const fill = static_cast<double>(inside) / total;
+  double const fill = total > 0 ? static_cast<double>(inside) / total : 0.0;
   if (fill < min_fill) return p;
   p.sides[0] = {Eigen::Vector3d(a.n.x(), a.n.y(), -a.rho), a.points};
   p.sides[1] = {Eigen::Vector3d(b.n.x(), b.n.y(), -b.rho), b.points};
@@ -230,7 +252,6 @@ bool sideOfPoints(std::vector<int> const& idx, std::vector<Edgel> const& edgels,
   side.n = n;
   side.rho = rho;
   side.points = std::move(pts);
-  side.setExtent();
   return true;
 }
 
@@ -247,7 +268,6 @@ Side joinSides(Side const& a, Side const& b) {
   Side s = a;
   s.points.insert(s.points.end(), b.points.begin(), b.points.end());
   fitTls(s.points, s.n, s.rho);
-  s.setExtent();
   return s;
 }
 
@@ -256,8 +276,8 @@ Side joinSides(Side const& a, Side const& b) {
 // left out). These pairs hold whatever the angle between the sides (a shaft near the lens narrows
 // fast toward its tip) and wherever the view's border or the jaws cut the part; parts without one
 // (shafts that touch or cross) are the Hough transform's. Marks the pairs' points used.
-std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat const& labels, cv::Mat const& smooth, std::vector<char>& used,
-                                    int min_points, double min_width, ContourLinesParams const& p) {
+std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat const& labels, cv::Mat const& smooth, FieldOfView const& fov,
+                                    std::vector<char>& used, int min_points, double min_width, ContourLinesParams const& p) {
   double max_label = 0.0;
   cv::minMaxLoc(labels, nullptr, &max_label);
   std::vector<std::vector<int>> members(static_cast<std::size_t>(max_label) + 1);
@@ -283,7 +303,7 @@ std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat co
     }
     Side a, b;
     if (!sideOfPoints(half[0], edgels, min_points, p, a) || !sideOfPoints(half[1], edgels, min_points, p, b)) continue;
-    MaskLinePair pair = pairSides(a, b, smooth, cos_max, min_points, min_width, p.min_fill);
+    MaskLinePair pair = pairSides(a, b, smooth, &fov, cos_max, min_points, min_width, p.min_fill);
     if (pair.support <= 0.0) continue;
     // The part is this shaft only when it lies between the two lines (shafts that touch or cross
     // fill the lines' strip and more).
@@ -305,7 +325,7 @@ std::vector<MaskLinePair> partPairs(std::vector<Edgel> const& edgels, cv::Mat co
       Side& ca = straight ? c : d;
       Side& db = straight ? d : c;
       Side ja = joinSides(ca, a), jb = joinSides(db, b);
-      MaskLinePair joined = pairSides(ja, jb, smooth, cos_max, min_points, min_width, p.min_fill);
+      MaskLinePair joined = pairSides(ja, jb, smooth, &fov, cos_max, min_points, min_width, p.min_fill);
       if (joined.support <= 0.0) continue;
       ca = std::move(ja), db = std::move(jb);
       out[j] = std::move(joined);
@@ -363,7 +383,7 @@ std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfV
   int const min_points = std::max(3, params.min_side_points);
   double const min_width = params.min_width_px / scale;
   std::vector<char> used(edgels.size(), 0);
-  std::vector<MaskLinePair> out = partPairs(edgels, labels, smooth, used, min_points, min_width, params);
+  std::vector<MaskLinePair> out = partPairs(edgels, labels, smooth, fov, used, min_points, min_width, params);
   std::vector<Side> sides;
   double const bin = 2.0 * M_PI / kAngleBins;
   for (auto const& [k, rho] : houghPeaks(edgels, probability.size(), 0.8 * min_points)) {
@@ -378,7 +398,7 @@ std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfV
   std::vector<Candidate> candidates;
   for (std::size_t i = 0; i < sides.size(); ++i)
     for (std::size_t j = i + 1; j < sides.size(); ++j)
-      if (MaskLinePair p = pairSides(sides[i], sides[j], smooth, cos_max, min_points, min_width, params.min_fill); p.support > 0.0)
+      if (MaskLinePair p = pairSides(sides[i], sides[j], smooth, nullptr, cos_max, min_points, min_width, params.min_fill); p.support > 0.0)
         candidates.push_back({std::move(p), i, j});
   std::stable_sort(candidates.begin(), candidates.end(), [](auto const& x, auto const& y) { return x.pair.support > y.pair.support; });
   std::vector<char> taken(sides.size(), 0);

@@ -195,6 +195,27 @@ TEST(MaskLinePairs, AShaftCutLengthwiseByTheBorderKeepsTheSidesItShows) {
   EXPECT_GE(depthAt(fullView(), pairs[0].far), 40.0);  // the far end is the tip, inside the view
 }
 
+TEST(MaskLinePairs, AStubEnteringObliquelyAcrossTheBorderIsPairedUpToIt) {
+  // A shaft stub 50 px wide entering across the right edge at 30 deg, its jaws (the instrument,
+  // not shaft) from x = 280 on in: the edge and the jaws cut each side to 46 px, 29 px apart
+  // along the axis. Where the two face each other (17 px) is under half their distance, as a
+  // blob's sides; but the view cut them, not the shaft: they are its pair, each up to the edge.
+  Eigen::Vector2d const out(std::cos(30.0 * M_PI / 180.0), -std::sin(30.0 * M_PI / 180.0));
+  Eigen::Vector2d const b(250.0, 150.0);
+  Strip const s{b + 150.0 * out, b, 50.0};
+  cv::Mat const instrument = draw({s});
+  cv::Mat const shaft = draw({s}, {cv::Rect(0, 0, 280, kH)});
+  auto const pairs = findMaskLinePairs(shaft, fullView(), 2, ContourLinesParams{}, instrument);
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(pairs[0], s, {90.0, 130.0}, 0.3));
+  EXPECT_GE(pairs[0].entry.x(), kW - 9.0);  // the entry at the right edge
+  for (int k = 0; k < 2; ++k) {  // each side's points run on to the edge
+    double reach = 0.0;
+    for (auto const& q : pairs[0].sides[k].points) reach = std::max(reach, q.x());
+    EXPECT_GE(reach, kW - 12.0) << "side " << k;
+  }
+}
+
 TEST(MaskLinePairs, WhereTheInstrumentGoesOnTheShaftsOutlineIsNoSide) {
   // The shaft class along y 98-122 from the left edge to x = 200; its jaws (instrument, not
   // shaft) lie along its lower side from x = 100 on. That stretch of the shaft's outline is the

@@ -36,7 +36,8 @@ struct MaskLinePair {
 /// instrument's probability, goes on outside, the shaft meets its own jaws: no side) give:
 /// - first, each connected part of the mask that is one shaft: its outline split by its principal
 ///   axis is one straight side on each half (LMedS, [Rousseeuw87]), facing each other within 35 deg
-///   (a shaft near the lens narrows fast toward its tip; the border may cut it anywhere);
+///   (a shaft near the lens narrows fast toward its tip; the border may cut it anywhere: the sides
+///   of a stub that both run into the view's edge face each other up to the farther one);
 /// - then, from the points left, a Hough transform of oriented lines ([Duda72]), each point voting
 ///   about its own gradient's direction only ([OGorman76]), so a side's votes do not mix with
 ///   those of the facing side. Each peak is a side: its points within 2 px, refined by total least
