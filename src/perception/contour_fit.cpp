@@ -43,6 +43,11 @@ std::variant<RefinedLine, ContourRejection> refineSide(SideFit const& sides, int
   double const te = dr.dot(geometry::footOnLine(r->line, sides.entry)), tf = dr.dot(geometry::footOnLine(r->line, sides.far));
   double const inf = std::numeric_limits<double>::infinity();
   if (auto const x = extendLineSubpixel(bgr, *r, t0 + 2.0, t1 - 2.0, tf > te ? te : -inf, tf > te ? inf : te, p, dir)) r = x;
+  if (sides.mask_gate_px > 0.0) {  // a mask's side: edges farther from it at either end are another edge's
+    Eigen::Vector2d const d(-sides.lines[s].y(), sides.lines[s].x()), o = geometry::footOnLine(sides.lines[s], Eigen::Vector2d::Zero());
+    for (double const t : {t0, t1})
+      if (std::abs(r->line.dot((o + t * d).homogeneous())) > sides.mask_gate_px) return ContourRejection::kWeakEdges;
+  }
   return *r;
 }
 

@@ -104,13 +104,16 @@ namespace {
 // a few px about them); kNone in its rejection when accepted. The edges are sought in the chroma
 // first (edgeChannel(): shafts are greyer than tissue); a side without edges there is sought
 // along its own colour direction (sideColourDirection(): the shaft's colour to the tissue's
-// across the mask's side), as grey fat and membrane are as grey as a shaft. Where the frame has
+// across the mask's side), as grey fat and membrane are as grey as a shaft. Edges whose line lies
+// beyond three times the mask's outline error from the mask's side at either end are another
+// edge's (a tissue fold, a jaw), not this side's. Where the frame has
 // no edges either way on one side, that side is the mask's own line, its covariance as wide as the
 // mask's outline error (kMaskOutlineSigmaPx), so that pose, trocar and servo weigh it so; with no
 // edges on either side the pair is refused (the frame measures at least one side).
 constexpr double kMaskOutlineSigmaPx = 4.0;  // full-res px: the network's outline to the annotated one, median 3-5 px (docs/accuracy.md)
 ContourFit fitPair(SideFit sides, double width, Region const& region, DetectionFrame const& frame, ContourLinesParams const& p,
                    std::vector<geometry::ApparentContour> const& found) {
+  sides.mask_gate_px = 3.0 * kMaskOutlineSigmaPx;
   ContourFit f = refineContour(sides, region, frame.fov, frame.bgr, frame.scale, p);
   if (f.rejection == ContourRejection::kWeakEdges) {
     // The samples: inside the shaft by under a third of its width, outside beyond the mask's error.

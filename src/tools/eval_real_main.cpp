@@ -783,13 +783,17 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             std::printf("%s(a%d)%s", toString(r.region_status[i]), r.regions[i].area, i + 1 < r.regions.size() ? "; " : "");
           std::printf("]\n");
         }
-        if (!overlay_dir.empty() && frames_annot % 10 == 1) {
+        if (!overlay_dir.empty() && (frames_annot % 10 == 1 || verbose)) {  // (--verbose: every annotated frame)
           cv::Mat ov = im.clone();
           std::vector<Eigen::Vector3d> ti;
           for (auto const& p : out.insertion_points) ti.push_back(p.image_point);
           drawSegmentationOverlay(ov, r, ti);
           for (auto const& a : it->second)
             cv::line(ov, cv::Point(a.a.x(), a.a.y()), cv::Point(a.b.x(), a.b.y()), {0, 0, 255}, 1);
+          if (masks_ok)  // the mask shafts' scored sides, as dots
+            for (auto const& m : roboticMaskShafts(mask_frames, nullptr))
+              for (int k = 0; k < 2; ++k)
+                for (auto const& q : m.sides[k]) cv::circle(ov, cv::Point(q.x(), q.y()), 0, k ? cv::Scalar(255, 255, 0) : cv::Scalar(0, 255, 255), 1);
           fs::create_directories(overlay_dir);
           cv::imwrite((fs::path(overlay_dir) / ("robotic" + std::to_string(ds) + "_" + std::to_string(frame) + ".png")).string(), ov);
         }

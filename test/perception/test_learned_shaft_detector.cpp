@@ -230,6 +230,36 @@ TEST(LearnedShaftDetector, ASideWithoutFrameEdgesIsTheMasksSideWithItsError) {
   EXPECT_TRUE(std::isfinite(sigma_mask));
 }
 
+// The same grey-on-grey side, with a fold of red tissue beyond it that meets the mask's side near
+// the tip and runs 24 px away from it at the entry: the frame's edge beside the side there is the
+// fold's, not the shaft's. The mask's side is kept (the mask is within its error of the shaft's
+// edge, the fold is not), not the fold's line.
+TEST(LearnedShaftDetector, AFrameEdgeBeyondTheMasksErrorIsNotTheSide) {
+  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+  bgr(cv::Rect(0, 200, 640, 280)).setTo(cv::Scalar(128, 128, 128));  // the shaft, rows 200-239, on grey below
+  std::vector<cv::Point> const fold{{0, 270}, {400, 246}, {640, 246}, {640, 480}, {0, 480}};
+  cv::fillPoly(bgr, std::vector<std::vector<cv::Point>>{fold}, cv::Scalar(60, 80, 200), cv::LINE_AA);
+  cv::Mat half;
+  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  FieldOfView const fov = detectFieldOfView(half);
+  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F);
+  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);  // y 195.5-243.5 at full scale
+  std::vector<Eigen::Vector3d> const no_trocars;
+  DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
+  cv::Mat labels;
+  SegmentationResult const r = shaftsOfProbability(frame, {prob, prob}, SegmentationParams{}, labels);
+  ASSERT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
+  ApparentContour const& c = r.contours[0];
+  auto off = [](Eigen::Vector3d const& l, double y) {
+    return std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1))));
+  };
+  int const edge = off(c.lines[0], 199.5) < off(c.lines[1], 199.5) ? 0 : 1;
+  EXPECT_LT(off(c.lines[edge], 199.5), 0.2);
+  EXPECT_LT(off(c.lines[1 - edge], 243.5), 1.0);  // the mask's side, not the fold (24 px below it at x = 0)
+  Eigen::Vector3d const mid(200.0, 220.0, 1.0);
+  EXPECT_GT(std::sqrt(mid.dot(c.line_covariances[1 - edge] * mid)), 2.0);
+}
+
 // A grey shaft entering from the left on red tissue (640 x 480, edges at y = 199.5 and 239.5,
 // x from 0 to 399), or another 640 x 480 frame, and the stage after the network fed masks of it at
 // the processing scale (half).

@@ -30,6 +30,9 @@ struct SideFit {
   /// > 0: one side without edges in the frame keeps its own line (a mask's side) in the contour,
   /// with this systematic error (full-resolution px) at each end in its covariance; 0: refused.
   double mask_side_sigma_px = 0.0;
+  /// > 0: the sides are a mask's outline, within this (full-resolution px) of the shaft's edge: a
+  /// side whose frame edges lie farther from it at either end has none of its own (kWeakEdges).
+  double mask_gate_px = 0.0;
   /// Set by scoreSides(): its wide profiles of each side, which refineContour()'s wide pass (the
   /// same profiles, denser) reuses where line and start are still the same.
   std::array<ProfileEdges, 2> scored;
