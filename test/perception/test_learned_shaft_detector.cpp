@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <opencv2/imgproc.hpp>
 #include <utility>
 
@@ -199,65 +200,67 @@ TEST(LearnedShaftDetector, ASideAsGreyAsTheTissueIsFoundAlongItsColourDirection)
   EXPECT_TRUE(shaftsOfProbability(none, {prob, prob}, sp, labels).contours.empty());
 }
 
+namespace {
+
+// A grey shaft on red tissue, rows 200-239 from the left border, on grey tissue below it (no edge
+// either way along its lower side), and `fold` filled red: the stage after the network fed a mask
+// of it 4 px too wide each side (half scale, rows 98-121: y 195.5-243.5). Its one contour, or none.
+std::optional<ApparentContour> greyBelowContour(std::vector<cv::Point> const& fold = {}) {
+  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
+  bgr(cv::Rect(0, 200, 640, 280)).setTo(cv::Scalar(128, 128, 128));
+  if (!fold.empty()) cv::fillPoly(bgr, std::vector<std::vector<cv::Point>>{fold}, cv::Scalar(60, 80, 200), cv::LINE_AA);
+  cv::Mat half;
+  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
+  FieldOfView const fov = detectFieldOfView(half);
+  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F);
+  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);
+  std::vector<Eigen::Vector3d> const no_trocars;
+  DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
+  cv::Mat labels;
+  SegmentationResult const r = shaftsOfProbability(frame, {prob, prob}, SegmentationParams{}, labels);
+  EXPECT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
+  if (r.contours.size() != 1u) return std::nullopt;
+  return r.contours[0];
+}
+
+// A line's distance to the row y at both ends of the shaft (x = 40 and 360).
+double offRow(Eigen::Vector3d const& l, double y) {
+  return std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1))));
+}
+
+// Its line's standard deviation at the shaft's middle, from its covariance.
+double sigmaAtMiddle(ApparentContour const& c, int k) {
+  Eigen::Vector3d const mid(200.0, 220.0, 1.0);
+  return std::sqrt(mid.dot(c.line_covariances[k] * mid));
+}
+
+}  // namespace
+
 // One side with no edge in the frame either way (the tissue below the shaft as grey as it is): the
 // contour keeps the mask's side there, with a covariance as wide as a mask's outline error, and
 // its other line on the frame's edge; with no edge on either side it is refused (above).
 TEST(LearnedShaftDetector, ASideWithoutFrameEdgesIsTheMasksSideWithItsError) {
-  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
-  bgr(cv::Rect(0, 200, 640, 280)).setTo(cv::Scalar(128, 128, 128));  // the shaft, rows 200-239, on grey below
-  cv::Mat half;
-  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
-  FieldOfView const fov = detectFieldOfView(half);
-  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F);
-  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);  // y 195.5-243.5 at full scale
-  std::vector<Eigen::Vector3d> const no_trocars;
-  DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
-  cv::Mat labels;
-  SegmentationResult const r = shaftsOfProbability(frame, {prob, prob}, SegmentationParams{}, labels);
-  ASSERT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
-  ApparentContour const& c = r.contours[0];
-  auto off = [](Eigen::Vector3d const& l, double y) {  // the line's distance to y at both ends of the shaft
-    return std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1))));
-  };
-  int const edge = off(c.lines[0], 199.5) < off(c.lines[1], 199.5) ? 0 : 1;
-  EXPECT_LT(off(c.lines[edge], 199.5), 0.2);         // on the frame's edge
-  EXPECT_LT(off(c.lines[1 - edge], 243.5), 1.0);     // the mask's side (4 px below the true edge)
-  Eigen::Vector3d const mid(200.0, 220.0, 1.0);
-  double const sigma_edge = std::sqrt(mid.dot(c.line_covariances[edge] * mid));
-  double const sigma_mask = std::sqrt(mid.dot(c.line_covariances[1 - edge] * mid));
-  EXPECT_LT(sigma_edge, 0.5);
-  EXPECT_GT(sigma_mask, 2.0);  // worth what a mask's outline is: a few px
-  EXPECT_TRUE(std::isfinite(sigma_mask));
+  auto const c = greyBelowContour();
+  ASSERT_TRUE(c);
+  int const edge = offRow(c->lines[0], 199.5) < offRow(c->lines[1], 199.5) ? 0 : 1;
+  EXPECT_LT(offRow(c->lines[edge], 199.5), 0.2);      // on the frame's edge
+  EXPECT_LT(offRow(c->lines[1 - edge], 243.5), 1.0);  // the mask's side (4 px below the true edge)
+  EXPECT_LT(sigmaAtMiddle(*c, edge), 0.5);
+  EXPECT_GT(sigmaAtMiddle(*c, 1 - edge), 2.0);  // worth what a mask's outline is: a few px
+  EXPECT_TRUE(std::isfinite(sigmaAtMiddle(*c, 1 - edge)));
 }
 
-// The same grey-on-grey side, with a fold of red tissue beyond it that meets the mask's side near
-// the tip and runs 24 px away from it at the entry: the frame's edge beside the side there is the
-// fold's, not the shaft's. The mask's side is kept (the mask is within its error of the shaft's
-// edge, the fold is not), not the fold's line.
+// The same, with a fold of red tissue below the shaft that meets the mask's side near the tip and
+// runs 24 px away from it at the entry: the frame's edge beside the side is the fold's there, not
+// the shaft's. The mask's side is kept (the mask is within its error of the shaft's edge, the fold
+// is not), not the fold's line.
 TEST(LearnedShaftDetector, AFrameEdgeBeyondTheMasksErrorIsNotTheSide) {
-  cv::Mat bgr(480, 640, CV_8UC3, cv::Scalar(60, 80, 200));
-  bgr(cv::Rect(0, 200, 640, 280)).setTo(cv::Scalar(128, 128, 128));  // the shaft, rows 200-239, on grey below
-  std::vector<cv::Point> const fold{{0, 270}, {400, 246}, {640, 246}, {640, 480}, {0, 480}};
-  cv::fillPoly(bgr, std::vector<std::vector<cv::Point>>{fold}, cv::Scalar(60, 80, 200), cv::LINE_AA);
-  cv::Mat half;
-  cv::resize(bgr, half, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
-  FieldOfView const fov = detectFieldOfView(half);
-  cv::Mat prob = cv::Mat::zeros(240, 320, CV_32F);
-  cv::rectangle(prob, cv::Rect(0, 98, 200, 24), cv::Scalar(1.0), cv::FILLED);  // y 195.5-243.5 at full scale
-  std::vector<Eigen::Vector3d> const no_trocars;
-  DetectionFrame const frame{bgr, half, fov, static_cast<double>(cv::countNonZero(fov.mask)), 2, no_trocars, 1};
-  cv::Mat labels;
-  SegmentationResult const r = shaftsOfProbability(frame, {prob, prob}, SegmentationParams{}, labels);
-  ASSERT_EQ(r.contours.size(), 1u) << (r.region_status.empty() ? "no pair" : toString(r.region_status[0]));
-  ApparentContour const& c = r.contours[0];
-  auto off = [](Eigen::Vector3d const& l, double y) {
-    return std::max(std::abs(l.dot(Eigen::Vector3d(40, y, 1))), std::abs(l.dot(Eigen::Vector3d(360, y, 1))));
-  };
-  int const edge = off(c.lines[0], 199.5) < off(c.lines[1], 199.5) ? 0 : 1;
-  EXPECT_LT(off(c.lines[edge], 199.5), 0.2);
-  EXPECT_LT(off(c.lines[1 - edge], 243.5), 1.0);  // the mask's side, not the fold (24 px below it at x = 0)
-  Eigen::Vector3d const mid(200.0, 220.0, 1.0);
-  EXPECT_GT(std::sqrt(mid.dot(c.line_covariances[1 - edge] * mid)), 2.0);
+  auto const c = greyBelowContour({{0, 270}, {400, 246}, {640, 246}, {640, 480}, {0, 480}});
+  ASSERT_TRUE(c);
+  int const edge = offRow(c->lines[0], 199.5) < offRow(c->lines[1], 199.5) ? 0 : 1;
+  EXPECT_LT(offRow(c->lines[edge], 199.5), 0.2);
+  EXPECT_LT(offRow(c->lines[1 - edge], 243.5), 1.0);  // the mask's side, not the fold
+  EXPECT_GT(sigmaAtMiddle(*c, 1 - edge), 2.0);
 }
 
 // A grey shaft entering from the left on red tissue (640 x 480, edges at y = 199.5 and 239.5,
