@@ -163,21 +163,21 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, Fiel
   MaskLinePair p;
   if (a.n.dot(b.n) > -cos_max_angle) return p;
   Eigen::Vector2d const u = a.along();
-  // Each side's extent along u, and whether its ends there are at the view's edge.
-  auto extent = [&](Side const& s, double& t0, double& t1, bool& edge0, bool& edge1) {
+  struct Extent {
+    double t0, t1;     // along u
+    bool edge0, edge1; // its ends there at the view's edge
+  };
+  auto extent = [&](Side const& s) {
     Eigen::Vector2d q0 = s.points.front(), q1 = q0;
     for (auto const& q : s.points) {
       if (u.dot(q) < u.dot(q0)) q0 = q;
       if (u.dot(q) > u.dot(q1)) q1 = q;
     }
-    t0 = u.dot(q0), t1 = u.dot(q1);
-    edge0 = fov && depthAt(*fov, q0) <= kEdgeMarginPx + kAtEdgePx, edge1 = fov && depthAt(*fov, q1) <= kEdgeMarginPx + kAtEdgePx;
+    auto atEdge = [&](Eigen::Vector2d const& q) { return fov && depthAt(*fov, q) <= kEdgeMarginPx + kAtEdgePx; };
+    return Extent{u.dot(q0), u.dot(q1), atEdge(q0), atEdge(q1)};
   };
-  double alo, ahi, blo, bhi;
-  bool ae0, ae1, be0, be1;
-  extent(a, alo, ahi, ae0, ae1);
-  extent(b, blo, bhi, be0, be1);
-  double lo = std::max(alo, blo), hi = std::min(ahi, bhi);  // where the two face each other
+  Extent const ea = extent(a), eb = extent(b);
+  double lo = std::max(ea.t0, eb.t0), hi = std::min(ea.t1, eb.t1);  // where the two face each other
   if (hi <= lo) return p;
   std::vector<double> wb, wa;
   auto widths = [&](double& w, double& w2) {  // each side's median distance from the other's line
@@ -194,9 +194,10 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, Fiel
   // Sides that face each other over less than half their distance are a blob's, or the two ends
   // of a shaft's piece; unless both run into the view's edge there: the view cut them, not the
   // shaft (a stub entering obliquely across the border), and they face each other up to the farther.
-  if ((!measured || hi - lo < 0.5 * std::max(w, w2)) && ((ae0 && be0) || (ae1 && be1))) {
-    if (ae0 && be0) lo = std::min(alo, blo);
-    if (ae1 && be1) hi = std::max(ahi, bhi);
+  bool const cut0 = ea.edge0 && eb.edge0, cut1 = ea.edge1 && eb.edge1;
+  if ((!measured || hi - lo < 0.5 * std::max(w, w2)) && (cut0 || cut1)) {
+    if (cut0) lo = std::min(ea.t0, eb.t0);
+    if (cut1) hi = std::max(ea.t1, eb.t1);
     measured = hi - lo >= min_points && widths(w, w2);
   }
   if (!measured || !(w >= min_width && w2 >= min_width) || hi - lo < 0.5 * std::max(w, w2)) return p;

@@ -716,9 +716,10 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
             std::printf("  false ds%d frame %d (%s): entry (%.0f %.0f) tip (%.0f %.0f)\n", ds, frame, r.tracked ? "tracked" : "detected",
                         c.entry_px.x(), c.entry_px.y(), c.tip_px.x(), c.tip_px.y());
         }
+        std::vector<MaskShaft> ms;  // (the overlay draws their sides)
         if (masks_ok) {
           std::vector<cv::Mat> components;
-          std::vector<MaskShaft> const ms = roboticMaskShafts(mask_frames, net ? &components : nullptr);
+          ms = roboticMaskShafts(mask_frames, net ? &components : nullptr);
           StrictScore const sc = scoreStrict(ms, r.contours);
           strict += sc;
           if (verbose) {  // each mask shaft missed and each false detection at 10 px
@@ -790,10 +791,9 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
           drawSegmentationOverlay(ov, r, ti);
           for (auto const& a : it->second)
             cv::line(ov, cv::Point(a.a.x(), a.a.y()), cv::Point(a.b.x(), a.b.y()), {0, 0, 255}, 1);
-          if (masks_ok)  // the mask shafts' scored sides, as dots
-            for (auto const& m : roboticMaskShafts(mask_frames, nullptr))
-              for (int k = 0; k < 2; ++k)
-                for (auto const& q : m.sides[k]) cv::circle(ov, cv::Point(q.x(), q.y()), 0, k ? cv::Scalar(255, 255, 0) : cv::Scalar(0, 255, 255), 1);
+          for (auto const& m : ms)  // the mask shafts' scored sides, as dots
+            for (int k = 0; k < 2; ++k)
+              for (auto const& q : m.sides[k]) cv::circle(ov, cv::Point(q.x(), q.y()), 0, k ? cv::Scalar(255, 255, 0) : cv::Scalar(0, 255, 255), 1);
           fs::create_directories(overlay_dir);
           cv::imwrite((fs::path(overlay_dir) / ("robotic" + std::to_string(ds) + "_" + std::to_string(frame) + ".png")).string(), ov);
         }
