@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 # Copyright (C) endo_guidance developers. SPDX-License-Identifier: GPL-2.0-or-later
-"""Trains the learned shaft mask (background / shaft / jaws per pixel) on the CPU and exports it
-to ONNX for OpenCV's DNN module (perception/learned_shaft_detector.h).
+"""Trains the learned shaft mask (background / shaft / jaws per pixel, and the shaft's silhouette
+sides: the shaft's outline against the background, not against its jaws or the view's black edge)
+on the CPU and exports it to ONNX for OpenCV's DNN module (perception/learned_shaft_detector.h).
 
 Data (read from ../shared/data, never copied): the EndoVis'15 rigid in-vivo stills (OP1-OP3,
 class masks 0 / 70 jaws / 160 shaft), the robotic sequences' mask videos (DS1, DS2; every 5th
@@ -33,6 +34,7 @@ except ImportError:
 NET_W, NET_H = 160, 128          # network input (any frame is resized to it; --size)
 STORE_W, STORE_H = 320, 256      # training images are kept at twice the input, augmented, then reduced
 CLASSES = ("background", "shaft", "jaws")
+SIDE = len(CLASSES)  # one more output channel: the shaft's silhouette sides (a logit, sigmoid)
 MEAN, SCALE = 127.5, 1.0 / 127.5  # input = (BGR - MEAN) * SCALE
 
 
@@ -111,6 +113,8 @@ def augment(im, lab, rng):
         im, lab = im[:, ::-1], lab[:, ::-1]
     if rng.random() < 0.3:
         im, lab = im[::-1], lab[::-1]
+    # The view's own black edge (OP1's top rows, the videos' borders) ends the labels, not the shaft.
+    dark = cv2.dilate((im.max(axis=2) < 15).astype(np.uint8), np.ones((5, 5), np.uint8))
     im = im.astype(np.float32)
     # Colour: per-channel cast, brightness, contrast, desaturation or over-saturation.
     im *= rng.uniform(0.75, 1.25, size=3).astype(np.float32)
@@ -123,15 +127,19 @@ def augment(im, lab, rng):
     if rng.random() < 0.5:
         im *= np.clip(1.0 - rng.uniform(0.0, 0.6) * r[..., None] ** 2, 0, 1)
     u = rng.random()
+    # (blacked out: the labels go on there, the sides are not seen)
     if u < 0.2:
         rad = rng.uniform(0.9, 1.3)
         out = np.hypot((xx - w / 2) / (h / 2), (yy - h / 2) / (h / 2)) > rad
         im[out] = rng.uniform(0, 12)
+        dark[out] = 1
     elif u < 0.35:
         bar = int(rng.uniform(0.0, 0.12) * w)
         if bar > 0:
             im[:, :bar] = 0
             im[:, w - bar:] = 0
+            dark[:, :bar] = 1
+            dark[:, w - bar:] = 1
     # Specular spots and smoke/haze.
     for _ in range(rng.integers(0, 5)):
         c = (int(rng.uniform(0, w)), int(rng.uniform(0, h)))
@@ -147,12 +155,23 @@ def augment(im, lab, rng):
     # Reduce to the input size, then noise and JPEG at that size.
     im = cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA)
     lab = cv2.resize(np.ascontiguousarray(lab), (NET_W, NET_H), interpolation=cv2.INTER_NEAREST)
+    side = side_band(lab) * (cv2.resize(dark, (NET_W, NET_H), interpolation=cv2.INTER_NEAREST) == 0)
     if rng.random() < 0.5:
         im = np.clip(im + rng.normal(0, rng.uniform(1, 8), im.shape), 0, 255).astype(np.uint8)
     if rng.random() < 0.5:
         ok, buf = cv2.imencode(".jpg", im, [cv2.IMWRITE_JPEG_QUALITY, int(rng.uniform(30, 95))])
         im = cv2.imdecode(buf, cv2.IMREAD_COLOR)
-    return np.ascontiguousarray(im), np.ascontiguousarray(lab)
+    return np.ascontiguousarray(im), np.ascontiguousarray(lab), side
+
+
+def side_band(lab):
+    """The shaft's sides at the labels' size: the pixels on either side of a shaft / background
+    boundary (a band 2 px wide). The shaft against its jaws or another tool is no side (the
+    caller also clears the view's black edge)."""
+    shaft = (lab == 1).astype(np.uint8)
+    background = (lab == 0).astype(np.uint8)
+    k = np.ones((3, 3), np.uint8)
+    return ((cv2.dilate(shaft, k) & background) | (cv2.dilate(background, k) & shaft)).astype(np.float32)
 
 
 def to_input(bgr_list):
@@ -183,7 +202,7 @@ class ShaftNet(nn.Module):
         self.d3 = DSConv(128 + 64, 64)
         self.d2 = DSConv(64 + 32, 40)
         self.d1 = DSConv(40 + 16, 24)
-        self.head = nn.Conv2d(24, len(CLASSES), 1)
+        self.head = nn.Conv2d(24, len(CLASSES) + 1, 1)  # the classes' logits, then the side's
 
     @staticmethod
     def up(x):
@@ -219,7 +238,7 @@ class MobileUNet(nn.Module):
         self.d3 = DSConv(c4 + 32, 64) if self.deep else nn.Identity()
         self.d2 = DSConv((64 if self.deep else 32) + 24, 40)
         self.d1 = DSConv(40 + 16, 24)
-        self.head = nn.Conv2d(24, len(CLASSES), 1)
+        self.head = nn.Conv2d(24, len(CLASSES) + 1, 1)  # the classes' logits, then the side's
 
     def load_pretrained(self, directory):
         import pretrained_backbone as pb
@@ -258,7 +277,7 @@ def iou(model, items):
         for i in range(0, len(items), 16):
             batch = items[i:i + 16]
             x = to_input([cv2.resize(im, (NET_W, NET_H), interpolation=cv2.INTER_AREA) for im, _ in batch])
-            pred = model(x).argmax(1).numpy()
+            pred = model(x)[:, :SIDE].argmax(1).numpy()
             for p, (_, lab) in zip(pred, batch):
                 t = cv2.resize(lab, (NET_W, NET_H), interpolation=cv2.INTER_NEAREST)
                 inter += int(np.sum((p == 1) & (t == 1)))
@@ -413,8 +432,12 @@ def main():
             pairs = [augment(*train[i], rng) for i in idx[b:b + batch]]
             x = to_input([p[0] for p in pairs])
             y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64))
-            logits = model(x)
+            out = model(x)
+            logits = out[:, :SIDE]
             loss = F.cross_entropy(logits, y, weight=class_w)
+            # The sides: a thin band, weighed as the shaft class is.
+            side = torch.from_numpy(np.stack([p[2] for p in pairs]))
+            loss = loss + F.binary_cross_entropy_with_logits(out[:, SIDE], side, pos_weight=torch.tensor(3.0))
             # Soft Dice on the shaft class: the thin shafts count as much as the wide ones.
             p = logits.softmax(1)[:, 1]
             t = (y == 1).float()
@@ -437,9 +460,11 @@ def main():
     with open(os.path.join(args.out, "shaft_net.yaml"), "w") as f:
         f.write("%YAML:1.0\n---\n")  # (the header OpenCV's FileStorage needs)
         f.write("# The learned shaft mask (scripts/train_shaft_net.sh reproduces it). Input: the BGR frame resized\n"
-                "# to width x height, (pixel - mean) * scale; output: logits per class at the input size.\n")
+                "# to width x height, (pixel - mean) * scale; output: logits per class, then the sides' logit,\n"
+                "# at the input size.\n")
         f.write("model: shaft_net.onnx\nwidth: %d\nheight: %d\nmean: %.1f\nscale: %.10f\n" % (NET_W, NET_H, MEAN, SCALE))
         f.write("classes: [%s]\n" % ", ".join(CLASSES))
+        f.write("side: %d  # the output channel of the shaft's sides (a logit)\n" % SIDE)
         f.write("trained_on: [%s]\n" % ", ".join(s for s in sites if s != args.hold_out))
         f.write("held_out: [%s]\n" % args.hold_out)
         if held:
@@ -456,7 +481,7 @@ def main():
         fs = cv2.FileStorage(os.path.join(args.out, "shaft_net_reference.yml.gz"), cv2.FILE_STORAGE_WRITE)
         fs.write("frame", os.path.basename(args.reference))
         fs.write("frame_sum", float(im.astype(np.float64).sum()))  # the C++ test renders the same frame
-        for c, name in enumerate(CLASSES):
+        for c, name in enumerate(CLASSES + ("side",)):
             fs.write(name, out[c].astype(np.float32))
         fs.release()
     held_report = "held-out (%s) shaft IoU %.3f" % (args.hold_out, held_iou) if held else "no site held out"

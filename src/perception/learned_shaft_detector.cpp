@@ -52,6 +52,10 @@ ShaftNet::ShaftNet(std::string const& yaml_path, int threads) : impl_(std::make_
   shaft_ = static_cast<int>(it - classes_.begin());
   auto const bg = std::find(classes_.begin(), classes_.end(), "background");
   background_ = bg == classes_.end() ? -1 : static_cast<int>(bg - classes_.begin());
+  if (!f["side"].empty()) {
+    side_ = static_cast<int>(f["side"]);
+    if (side_ != static_cast<int>(classes_.size())) fail("'side' must be the channel after the classes'");
+  }
   if (fs::path(onnx).is_relative()) onnx = (fs::path(path).parent_path() / onnx).string();
   if (!fs::is_regular_file(onnx)) fail("its ONNX file '" + onnx + "' is missing");
   try {
@@ -66,8 +70,10 @@ ShaftNet::ShaftNet(std::string const& yaml_path, int threads) : impl_(std::make_
   cv::setNumThreads(threads);  // (OpenCV's DNN layers use the global thread pool)
   // One forward pass now: a model whose layers OpenCV cannot run fails here, with its shape checked.
   cv::Mat const out = logits(cv::Mat(size_, CV_8UC3, cv::Scalar::all(0)));
-  if (out.dims != 4 || out.size[1] != static_cast<int>(classes_.size()) || out.size[2] != h || out.size[3] != w)
-    fail("its output is not classes x height x width logits");
+  int const outputs = static_cast<int>(classes_.size()) + (side_ >= 0 ? 1 : 0);
+  if (out.dims != 4 || out.size[1] != outputs || out.size[2] != h || out.size[3] != w)
+    fail("its output is not " + std::to_string(outputs) + " x height x width logits (the classes" +
+         (side_ >= 0 ? ", then the side's)" : ")"));
 }
 
 ShaftNet::~ShaftNet() = default;
@@ -86,6 +92,11 @@ ShaftProbabilities ShaftNet::probabilities(cv::Mat const& bgr) {
   int const n = size_.area(), k = static_cast<int>(classes_.size());
   auto const* l = out.ptr<float>();
   ShaftProbabilities r{cv::Mat(size_, CV_32F), cv::Mat(size_, CV_32F)};
+  if (side_ >= 0) {  // sigmoid
+    cv::Mat const logit(size_, CV_32F, const_cast<float*>(out.ptr<float>()) + side_ * n);
+    cv::exp(-logit, r.side);
+    r.side = 1.0 / (1.0 + r.side);
+  }
   auto* ps = r.shaft.ptr<float>();
   auto* pi = r.instrument.ptr<float>();
   for (int i = 0; i < n; ++i) {  // softmax over the classes: the shaft's share, and all but the background's
@@ -183,7 +194,8 @@ void LearnedShaftDetector::setParams(SegmentationParams const& p) {
 SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabilities const& probability,
                                        SegmentationParams const& params, cv::Mat& labels) {
   CV_Assert(probability.shaft.type() == CV_32F && probability.shaft.size() == frame.fov.mask.size() &&
-            probability.instrument.type() == CV_32F && probability.instrument.size() == frame.fov.mask.size());
+            probability.instrument.type() == CV_32F && probability.instrument.size() == frame.fov.mask.size() &&
+            (probability.side.empty() || (probability.side.type() == CV_32F && probability.side.size() == frame.fov.mask.size())));
   SegmentationResult res;
   res.scale = frame.scale;
   labels = cv::Mat::zeros(frame.fov.mask.size(), CV_8U);
@@ -196,7 +208,7 @@ SegmentationResult shaftsOfProbability(DetectionFrame const& frame, ShaftProbabi
     cv::Mat const& p = instrument ? probability.instrument : probability.shaft;
     // (the shaft class's outline where its own jaws go on beyond it is no side)
     cv::Mat const beyond = instrument ? cv::Mat() : probability.instrument;
-    for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours, beyond)) {
+    for (MaskLinePair const& pair : findMaskLinePairs(p, frame.fov, frame.scale, params.contours, beyond, probability.side)) {
       if (static_cast<int>(res.contours.size()) >= params.regions.max_regions) break;
       auto region = regionOf(pair, mask);
       if (!region) continue;
@@ -228,6 +240,7 @@ SegmentationResult LearnedShaftDetector::detect(DetectionFrame const& frame) {
   ShaftProbabilities p;  // at the processing scale
   cv::resize(net.shaft, p.shaft, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
   cv::resize(net.instrument, p.instrument, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+  if (!net.side.empty()) cv::resize(net.side, p.side, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
   SegmentationResult res = shaftsOfProbability(frame, p, params_, labels_);
   p.shaft.convertTo(feature_, CV_8U, -255.0, 255.0);  // low on shafts, as the colour feature
   return res;

@@ -31,6 +31,7 @@ struct Edgel {
   Eigen::Vector2d g;  // unit gradient, into the mask
   double angle;       // its direction
   int component;      // the mask's connected part it bounds
+  bool side;          // the network calls it a side (always, without a side map)
 };
 
 struct Side {
@@ -43,8 +44,10 @@ struct Side {
 // The boundary points of the mask (p >= 1/2 after a light smoothing) with their gradient and
 // connected part (`labels`, CV_32S, 0 off the mask). A point where `beyond` (the instrument's
 // probability; may be empty) stays at 1/2 or more just outside is where the shaft meets its own
-// jaws, not a side.
-std::vector<Edgel> maskEdgels(cv::Mat const& prob, cv::Mat const& beyond, FieldOfView const& fov, cv::Mat& smooth, cv::Mat& labels) {
+// jaws, not a side. Each is marked a side where `sides` (the network's side probability; may be
+// empty: every point) is 1/2 or more.
+std::vector<Edgel> maskEdgels(cv::Mat const& prob, cv::Mat const& beyond, cv::Mat const& sides, FieldOfView const& fov,
+                              cv::Mat& smooth, cv::Mat& labels) {
   cv::GaussianBlur(prob, smooth, cv::Size(), 1.0);
   cv::Mat gx, gy, mask, inner;
   cv::Sobel(smooth, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
@@ -64,8 +67,10 @@ std::vector<Edgel> maskEdgels(cv::Mat const& prob, cv::Mat const& beyond, FieldO
       }
       // Sub-pixel: out along the gradient to p = 1/2 (first order), at most 1.5 px.
       double const out_px = std::clamp((smooth.at<float>(y, x) - 0.5) / g, 0.0, 1.5);
-      out.push_back({Eigen::Vector2d(x - out_px * u / g, y - out_px * v / g), Eigen::Vector2d(u / g, v / g), std::atan2(v, u),
-                     labels.at<int>(y, x)});
+      Eigen::Vector2d const q(x - out_px * u / g, y - out_px * v / g);
+      bool const side = sides.empty() || sides.at<float>(std::clamp(static_cast<int>(std::lround(q.y())), 0, sides.rows - 1),
+                                                         std::clamp(static_cast<int>(std::lround(q.x())), 0, sides.cols - 1)) >= 0.5f;
+      out.push_back({q, Eigen::Vector2d(u / g, v / g), std::atan2(v, u), labels.at<int>(y, x), side});
     }
   return out;
 }
@@ -118,7 +123,8 @@ void fitTls(std::vector<Eigen::Vector2d> const& pts, Eigen::Vector2d& n, double&
   rho = -sign * l->z();
 }
 
-// The side a peak stands for: the unused points near it, refined.
+// The side a peak stands for: the unused points near it, refined; none unless the network's side
+// map calls min_points of them a side (a tool's head, an occluder's edge, the network's noise).
 bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std::vector<char>& used, int min_points, Side& side) {
   Eigen::Vector2d n(std::cos(angle), std::sin(angle));
   double const cos_turn = std::cos(kMaxTurnDeg * M_PI / 180.0);
@@ -136,6 +142,7 @@ bool sideOfPeak(double angle, double rho, std::vector<Edgel> const& edgels, std:
     fitTls(pts, n, rho);
     if (!select(kGatePx)) return false;
   }
+  if (std::count_if(sel.begin(), sel.end(), [&](int i) { return edgels[i].side; }) < min_points) return false;
   // Every point on the line: the pieces of a side broken by an occluder or a crossing shaft.
   side.points.clear();
   for (int i : sel) {
@@ -231,7 +238,8 @@ MaskLinePair pairSides(Side const& a, Side const& b, cv::Mat const& smooth, Fiel
 
 // A side of a mask part from its points (`idx`): an LMedS line ([Rousseeuw87]), then the points
 // within kGatePx of it whose gradient turns from its normal by under kMaxTurnDeg, refined by total
-// least squares; false unless min_points and half of the points are on it (not a straight side).
+// least squares; false unless min_points and half of the points are on it (not a straight side) and
+// the network's side map calls min_points of them a side.
 bool sideOfPoints(std::vector<int> const& idx, std::vector<Edgel> const& edgels, int min_points, ContourLinesParams const& p, Side& side) {
   if (static_cast<int>(idx.size()) < min_points) return false;
   std::vector<Eigen::Vector2d> pts;
@@ -243,13 +251,15 @@ bool sideOfPoints(std::vector<int> const& idx, std::vector<Edgel> const& edgels,
   double rho = -r->line.z();
   if (n.dot(g) < 0.0) n = -n, rho = -rho;
   double const cos_turn = std::cos(kMaxTurnDeg * M_PI / 180.0);
+  int sides = 0;
   for (int it = 0; it < 3; ++it) {
-    pts.clear();
+    pts.clear(), sides = 0;
     for (int i : idx)
-      if (std::abs(n.dot(edgels[i].x) - rho) <= kGatePx && n.dot(edgels[i].g) > cos_turn) pts.push_back(edgels[i].x);
+      if (std::abs(n.dot(edgels[i].x) - rho) <= kGatePx && n.dot(edgels[i].g) > cos_turn) pts.push_back(edgels[i].x), sides += edgels[i].side;
     if (static_cast<int>(pts.size()) < min_points || 2 * pts.size() < idx.size()) return false;
     fitTls(pts, n, rho);
   }
+  if (sides < min_points) return false;
   side.n = n;
   side.rho = rho;
   side.points = std::move(pts);
@@ -376,11 +386,12 @@ void setEntry(MaskLinePair& p, cv::Mat const& smooth, FieldOfView const& fov) {
 }  // namespace
 
 std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
-                                            ContourLinesParams const& params, cv::Mat const& beyond) {
+                                            ContourLinesParams const& params, cv::Mat const& beyond, cv::Mat const& side_probability) {
   CV_Assert(probability.type() == CV_32F && probability.size() == fov.mask.size() && scale >= 1);
   CV_Assert(beyond.empty() || (beyond.type() == CV_32F && beyond.size() == probability.size()));
+  CV_Assert(side_probability.empty() || (side_probability.type() == CV_32F && side_probability.size() == probability.size()));
   thread_local cv::Mat smooth, labels;  // (their buffers kept from call to call: no page faults per frame)
-  std::vector<Edgel> const edgels = maskEdgels(probability, beyond, fov, smooth, labels);
+  std::vector<Edgel> const edgels = maskEdgels(probability, beyond, side_probability, fov, smooth, labels);
   int const min_points = std::max(3, params.min_side_points);
   double const min_width = params.min_width_px / scale;
   std::vector<char> used(edgels.size(), 0);

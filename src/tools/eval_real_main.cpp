@@ -90,15 +90,18 @@ bool annotated_mask = false;  // --annotated-mask: the learned detector's stage 
 // The learned detector's stage after its network (shaftsOfProbability()) fed the annotated
 // shaft and instrument (shaft or jaws) masks, reduced to the network's input size and back as the
 // network's output is: what the line stage makes of a perfect mask, the ceiling of any network at
-// that size.
+// that size. With a model that gives the shaft's sides, they are the annotated ones, as the
+// training labels them (train_shaft_net.py's side_band()).
 class AnnotatedMaskDetector final : public ShaftDetector {
  public:
-  AnnotatedMaskDetector(SegmentationParams const& p, cv::Size net_size) : params_(p), net_size_(net_size) {}
+  AnnotatedMaskDetector(SegmentationParams const& p, ShaftNet const& net)
+      : params_(p), net_size_(net.inputSize()), sides_(net.hasSides()) {}
   /// The annotated classes (CV_8U, full resolution): 160 shaft, 70 jaws.
   void setClasses(cv::Mat const& cls) { classes_ = cls; }
   std::unique_ptr<ShaftDetector> clone() const override { return std::make_unique<AnnotatedMaskDetector>(*this); }
   SegmentationResult detect(DetectionFrame const& frame) override {
     ShaftProbabilities p{asNetwork(classes_ == 160, frame), asNetwork((classes_ == 160) | (classes_ == 70), frame)};
+    if (sides_) p.side = sideBand(frame);
     p.shaft.convertTo(feature_, CV_8U, -255.0, 255.0);
     return shaftsOfProbability(frame, p, params_, labels_);
   }
@@ -116,8 +119,31 @@ class AnnotatedMaskDetector final : public ShaftDetector {
     cv::resize(small, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
     return p;
   }
+  // The pixels on either side of a shaft / background boundary at the network's size (the view's
+  // black edge ends the labels, not the shaft: no side there), at the processing size.
+  cv::Mat sideBand(DetectionFrame const& frame) const {
+    cv::Mat small, shaft, background, grey, dark, band, p;
+    cv::resize(classes_, small, net_size_, 0, 0, cv::INTER_NEAREST);
+    shaft = small == 160;
+    background = small == 0;
+    cv::Mat const k = cv::Mat::ones(3, 3, CV_8U);
+    cv::dilate(shaft, band, k);
+    cv::dilate(background, p, k);
+    band = (band & background) | (p & shaft);
+    std::vector<cv::Mat> ch;
+    cv::split(frame.bgr, ch);
+    cv::max(ch[0], ch[1], grey);
+    cv::max(grey, ch[2], grey);
+    cv::dilate(grey < 15, dark, cv::Mat::ones(9, 9, CV_8U));
+    cv::resize(dark, dark, net_size_, 0, 0, cv::INTER_NEAREST);
+    band.setTo(0, dark);
+    band.convertTo(band, CV_32F, 1.0 / 255.0);
+    cv::resize(band, p, frame.fov.mask.size(), 0, 0, cv::INTER_LINEAR);
+    return p;
+  }
   SegmentationParams params_;
   cv::Size net_size_;
+  bool sides_;
   cv::Mat classes_, feature_, labels_;
 };
 
@@ -193,7 +219,7 @@ bool evalInvivo(fs::path const& root, std::string const& overlay_dir, Segmentati
   AnnotatedMaskDetector* oracle = nullptr;
   InstrumentSegmenter seg = [&] {
     if (!annotated_mask) return InstrumentSegmenter(sp);
-    auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model).inputSize());
+    auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model));
     oracle = d.get();
     return InstrumentSegmenter(sp, std::move(d));
   }();
@@ -666,7 +692,7 @@ bool evalRobotic(fs::path const& root, std::string const& overlay_dir, Segmentat
     std::optional<InstrumentSegmenter> oracle_seg;
     SegmentationResult oracle_result;
     if (annotated_mask) {
-      auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model).inputSize());
+      auto d = std::make_unique<AnnotatedMaskDetector>(sp, ShaftNet(sp.learned.model));
       oracle = d.get();
       oracle_seg.emplace(sp, std::move(d));
     }

@@ -75,6 +75,12 @@ TEST(LearnedShaftDetector, MissingOrCorruptModelIsAClearErrorAtConstruction) {
   EXPECT_NE(expectThrowMessage(path).find("missing"), std::string::npos);
   writeFile("bad.onnx", std::string(4096, '\x7f'));
   EXPECT_NE(expectThrowMessage(path).find("cannot load"), std::string::npos);
+  // A side channel that is not the one after the classes', then one the model does not give.
+  std::string const committed_onnx = (fs::path(defaultShaftModel()).parent_path() / "shaft_net.onnx").string();
+  std::string const sides = "%YAML:1.0\n---\nmodel: " + committed_onnx + "\nwidth: 160\nheight: 128\nmean: 127.5\n"
+                            "scale: 0.0078431373\nclasses: [background, shaft, jaws]\n";
+  EXPECT_NE(expectThrowMessage(writeFile("side1.yaml", sides + "side: 1\n")).find("'side'"), std::string::npos);
+  EXPECT_NE(expectThrowMessage(writeFile("side3.yaml", sides + "side: 3\n")).find("not 4 x height"), std::string::npos);
   // The segmentation refuses the learned detector without a model, and keeps its parameters.
   SegmentationParams sp;
   sp.detector = SegmentationParams::Detector::kLearned;
@@ -96,14 +102,16 @@ TEST(LearnedShaftDetector, CommittedModelGivesTheTrainingFrameworksOutput) {
   cv::Mat const out = net.logits(f.image);
   ASSERT_EQ(out.dims, 4);
   ASSERT_EQ(out.size[0], 1);
-  ASSERT_EQ(out.size[1], 3);
+  std::vector<std::string> outputs = net.classes();  // (as the reference names them)
+  if (net.hasSides()) outputs.push_back("side");
+  ASSERT_EQ(out.size[1], static_cast<int>(outputs.size()));
   ASSERT_EQ(out.size[2], net.inputSize().height);
   ASSERT_EQ(out.size[3], net.inputSize().width);
   int const n = net.inputSize().area();
   double worst = 0.0, range = 0.0;
-  for (int c = 0; c < 3; ++c) {
+  for (int c = 0; c < out.size[1]; ++c) {
     cv::Mat expected;
-    ref[net.classes()[static_cast<std::size_t>(c)]] >> expected;
+    ref[outputs[static_cast<std::size_t>(c)]] >> expected;
     ASSERT_EQ(expected.size(), net.inputSize());
     cv::Mat const got(net.inputSize(), CV_32F, const_cast<float*>(out.ptr<float>()) + c * n);
     worst = std::max(worst, cv::norm(got, expected, cv::NORM_INF));
@@ -128,6 +136,14 @@ TEST(LearnedShaftDetector, CommittedModelGivesTheTrainingFrameworksOutput) {
     if (!cv::Rect(0, 0, p.cols, p.rows).contains(q)) continue;
     ++total;
     on += p.at<float>(q) > 0.5f;
+    if (!probs.side.empty()) {  // the side map: low inside, high on the silhouette line beside it
+      EXPECT_LT(probs.side.at<float>(q), 0.5f);
+      Eigen::Vector2d const e = footOnLine(v.truth.lines[0], m);
+      cv::Rect const near(static_cast<int>(e.x() * sx) - 1, static_cast<int>(e.y() * sy) - 1, 3, 3);
+      double side = 0.0;
+      cv::minMaxLoc(probs.side(near & cv::Rect(0, 0, p.cols, p.rows)), nullptr, &side);
+      EXPECT_GE(side, 0.5);
+    }
   }
   ASSERT_GE(total, 2);
   EXPECT_EQ(on, total);

@@ -256,3 +256,38 @@ TEST(MaskLinePairs, AShaftAcrossTheViewEntersAtItsWiderEnd) {
   ASSERT_EQ(mirrored.size(), 1u);
   EXPECT_GE(mirrored[0].entry.x(), kW - 9.0);
 }
+
+TEST(MaskLinePairs, AnOutlineTheNetworkDoesNotCallASideIsNone) {
+  // A shaft 24 px wide from the left edge to x = 150, then a head 44 px wide to x = 230 (a
+  // stapler's, in the instrument's mask). The network's side map holds the shaft's two sides
+  // only: the head's outline gives no side, and the one pair is the shaft's.
+  Strip const shaft{{-20.0, 110.0}, {150.0, 110.0}, 24.0};
+  Strip const head{{-20.0, 110.0}, {230.0, 110.0}, 44.0};
+  cv::Mat instrument = draw({head});
+  draw({shaft})(cv::Rect(0, 0, 150, kH)).copyTo(instrument(cv::Rect(0, 0, 150, kH)));
+  cv::Mat sides = cv::Mat::zeros(kH, kW, CV_32F);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < 150; ++x)
+      if (std::abs(std::abs(y - 110.0) - 12.0) <= 2.0) sides.at<float>(y, x) = 1.0f;
+  auto const with = findMaskLinePairs(instrument, fullView(), 2, ContourLinesParams{}, cv::Mat(), sides);
+  ASSERT_EQ(with.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(with[0], shaft, {20.0, 120.0}, 0.3));
+  for (auto const& side : with[0].sides)
+    for (auto const& q : side.points) EXPECT_LT(q.x(), 152.0);
+  // Without it, the head's outline is a pair of its own.
+  auto const without = findMaskLinePairs(instrument, fullView(), 2, ContourLinesParams{});
+  EXPECT_TRUE(std::any_of(without.begin(), without.end(), [&](MaskLinePair const& p) { return pairIsStrip(p, head, {180.0, 220.0}, 0.5); }));
+  // A side map that holds no side: no pair.
+  EXPECT_TRUE(findMaskLinePairs(instrument, fullView(), 2, ContourLinesParams{}, cv::Mat(), cv::Mat::zeros(kH, kW, CV_32F)).empty());
+  // A sheath of the shaft's width beyond the side map (the dataset labels it jaws): the sides run
+  // on along it, their points as far as the outline stays on their lines.
+  Strip const sheathed{{-20.0, 110.0}, {230.0, 110.0}, 24.0};
+  auto const on = findMaskLinePairs(draw({sheathed}), fullView(), 2, ContourLinesParams{}, cv::Mat(), sides);
+  ASSERT_EQ(on.size(), 1u);
+  EXPECT_TRUE(pairIsStrip(on[0], sheathed, {20.0, 200.0}, 0.3));
+  for (auto const& side : on[0].sides) {
+    double reach = 0.0;
+    for (auto const& q : side.points) reach = std::max(reach, q.x());
+    EXPECT_GT(reach, 220.0);
+  }
+}

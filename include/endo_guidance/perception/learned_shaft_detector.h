@@ -12,29 +12,34 @@
 namespace endo_guidance::perception {
 
 /// The network's output as probabilities (CV_32F in [0, 1], all of one size): the shaft class's,
-/// and the instrument's (shaft or jaws: one less the background's).
+/// the instrument's (shaft or jaws: one less the background's) and, from a model that gives them,
+/// the shaft's silhouette sides' (empty otherwise): a band about the shaft's outline where it meets
+/// the background, not where it meets its jaws, an occluding tool or the view's edge.
 struct ShaftProbabilities {
   cv::Mat shaft, instrument;
+  cv::Mat side = cv::Mat();  ///< (may be left out of an initialiser)
 };
 
 /// The per-pixel shaft network, run by OpenCV's DNN module on the CPU (no training framework at
 /// run time). The YAML beside the ONNX file gives the input size, the normalisation
-/// ((BGR - mean) * scale) and the class order (background, shaft, jaws). A missing or unreadable
-/// model throws std::runtime_error at construction, never per frame.
+/// ((BGR - mean) * scale), the class order (background, shaft, jaws) and, with `side: C`, the
+/// output channel C (after the classes) of the sides' logit. A missing or unreadable model throws
+/// std::runtime_error at construction, never per frame.
 class ShaftNet {
  public:
   explicit ShaftNet(std::string const& yaml_path, int threads = 1);
   ~ShaftNet();
   ShaftNet(ShaftNet const&) = delete;
   ShaftNet& operator=(ShaftNet const&) = delete;
-  /// Class logits (CV_32F, 1 x classes x height x width) of one BGR frame, resized to the input
+  /// Logits (CV_32F, 1 x outputs x height x width: the classes, then the side's) of one BGR frame, resized to the input
   /// (the network's own buffer: valid until the next call).
   cv::Mat logits(cv::Mat const& bgr);
-  /// The softmax probabilities of one BGR frame at the input size. A model without a background
-  /// class gives the shaft's as the instrument's.
+  /// The softmax probabilities of one BGR frame at the input size, and the sides' (sigmoid). A
+  /// model without a background class gives the shaft's as the instrument's.
   ShaftProbabilities probabilities(cv::Mat const& bgr);
   cv::Size inputSize() const { return size_; }
   std::vector<std::string> const& classes() const { return classes_; }
+  bool hasSides() const { return side_ >= 0; }
 
  private:
   struct Impl;  // the cv::dnn::Net (opencv2/dnn.hpp stays out of this header)
@@ -42,7 +47,7 @@ class ShaftNet {
   cv::Size size_;
   double mean_ = 0.0, scale_ = 1.0;
   std::vector<std::string> classes_;
-  int shaft_ = 1, background_ = -1;
+  int shaft_ = 1, background_ = -1, side_ = -1;
 };
 
 /// The learned detector's stage after its network, on its probabilities at the processing scale

@@ -33,7 +33,8 @@ struct MaskLinePair {
 
 /// The shafts of a probability mask (CV_32F in [0, 1], the field of view's size) as pairs of
 /// straight sides. Its boundary points (p >= 1/2, away from the view's edge; where `beyond`, the
-/// instrument's probability, goes on outside, the shaft meets its own jaws: no side) give:
+/// instrument's probability, goes on outside, the shaft meets its own jaws: no side; where
+/// `side_probability`, the network's, is under 1/2: no side) give:
 /// - first, each connected part of the mask that is one shaft: its outline split by its principal
 ///   axis is one straight side on each half (LMedS, [Rousseeuw87]), facing each other within 35 deg
 ///   (a shaft near the lens narrows fast toward its tip; the border may cut it anywhere: the sides
@@ -48,7 +49,8 @@ struct MaskLinePair {
 ///   or another shaft). Unlike the components of the mask, this keeps shafts that touch or cross
 ///   apart and joins the pieces of a broken one.
 std::vector<MaskLinePair> findMaskLinePairs(cv::Mat const& probability, FieldOfView const& fov, int scale,
-                                            ContourLinesParams const& params, cv::Mat const& beyond = cv::Mat());
+                                            ContourLinesParams const& params, cv::Mat const& beyond = cv::Mat(),
+                                            cv::Mat const& side_probability = cv::Mat());
 
 /// The pair as the contour fit's input at full resolution (x_full = scale x + (scale - 1) / 2):
 /// its lines with the shaft on their positive side, the points behind them, entry and far end.
