@@ -13,8 +13,9 @@
 #                                         frame the renderer draws now (after a change to it)
 #   scripts/train_shaft_net.sh --rescore DIR  scores the LOSO models already in DIR (DIR/SITE/shaft_net.yaml)
 #                                         with today's detector, no training; the table -> DIR/table.md
-# Arguments after the mode go to train_shaft_net.py (e.g. --loso --arch mnv2-10 --pretrained
-# build/pretrained --size 256x192 --seed 2: that run's LOSO models and table go to
+# Arguments after the mode go to train_shaft_net.py after the shipped recipe (RECIPE below), so
+# they override it (e.g. --loso --size 256x192 --seed 2, or --loso --arch shaftnet --epochs 240
+# for the small network from scratch: that run's LOSO models and table go to
 # build/training/loso/<its arguments>; SITES="OP3" holds out only those). With --pretrained, the
 # ImageNet weights are fetched (npm) and checked against TF.js's output first (pretrained_backbone.py).
 # Fixed seeds; the training time on this machine is printed.
@@ -22,7 +23,12 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 MODE="${1:-ship}"
 shift || true
-EXTRA=("$@")  # (passed on to train_shaft_net.py)
+ARGS=("$@")
+# The shipped model's recipe: MobileNetV2 to block_10 with its ImageNet weights, 160 x 128, 32
+# epochs, 2 threads (docs/accuracy.md); arguments after the mode are passed after it (the last wins).
+RECIPE=(--arch mnv2-10 --pretrained build/pretrained --size 160x128 --epochs 32 --threads 2)
+EXTRA=("${RECIPE[@]}" "${ARGS[@]}")  # (passed on to train_shaft_net.py)
+[ "$MODE" = --rescore ] && EXTRA=()
 PY=/usr/bin/python3
 DATA="${ENDO_GUIDANCE_DATA:-$(cd .. && pwd)/shared/data}"
 BIN=build/devel/lib/endo_guidance
@@ -38,6 +44,7 @@ fi
 for ((i = 0; i < ${#EXTRA[@]}; i++)); do
   if [ "${EXTRA[i]}" = --pretrained ]; then  # the ImageNet encoder: fetched, then checked against TF.js
     [ $((i + 1)) -lt ${#EXTRA[@]} ] || { echo "train_shaft_net.sh: --pretrained needs a folder (e.g. build/pretrained)" >&2; exit 2; }
+    [ -n "${EXTRA[i + 1]}" ] || continue  # (--pretrained "": random weights)
     if ! command -v npm >/dev/null; then
       echo "[train] installing nodejs and npm (the pretrained weights' package is fetched with npm pack, read with node)"
       DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
@@ -97,7 +104,7 @@ case "$MODE" in
     ;;
   --loso)
     L="$OUT/loso"
-    [ ${#EXTRA[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${EXTRA[@]}" | sed 's/--//g' | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
+    [ ${#ARGS[@]} -gt 0 ] && L="$OUT/loso/$(printf '%s_' "${ARGS[@]}" | sed 's/--//g' | tr -c 'A-Za-z0-9._-' '_' | sed 's/_*$//')"
     mkdir -p "$L"
     for site in ${SITES:-OP1 OP2 OP3 DS2}; do
       train "$L/$site" "$site"
@@ -116,12 +123,12 @@ case "$MODE" in
   --reference)
     rm -rf "$OUT/reference" "$OUT/reference_model"
     "$BIN/endo_guidance_synthetic" --write-sequence "$OUT/reference" --frames 1 >/dev/null
-    $PY scripts/train_shaft_net.py --data "$DATA" --out "$OUT/reference_model" --onnx models/shaft_net.onnx \
+    $PY scripts/train_shaft_net.py --data "$DATA" --out "$OUT/reference_model" "${RECIPE[@]}" --onnx models/shaft_net.onnx \
       --reference "$OUT/reference/frames/000000.png"
     cp "$OUT/reference_model/shaft_net_reference.yml.gz" models/
     ;;
   --rescore)
-    L="${EXTRA[0]:-}"
+    L="${ARGS[0]:-}"
     [ -d "$L" ] || { echo "train_shaft_net.sh: --rescore needs a LOSO folder (e.g. build/training/loso)" >&2; exit 2; }
     sites=()
     for site in OP1 OP2 OP3 DS2; do
