@@ -33,8 +33,10 @@ struct MaskLinePair {
 
 /// The shafts of a probability mask (CV_32F in [0, 1], the field of view's size) as pairs of
 /// straight sides. Its boundary points (p >= 1/2, away from the view's edge; where `beyond`, the
-/// instrument's probability, goes on outside, the shaft meets its own jaws: no side; where
-/// `side_probability`, the network's, is under 1/2: no side) give:
+/// instrument's probability, goes on outside, the shaft meets its own jaws: no side) give the
+/// sides below; with `side_probability` (the network's side map; may be empty), a side is one only
+/// where min_side_points of its points lie at p >= 1/2 there (not a tool's head, an occluder's edge
+/// or the network's noise), and keeps all of its points:
 /// - first, each connected part of the mask that is one shaft: its outline split by its principal
 ///   axis is one straight side on each half (LMedS, [Rousseeuw87]), facing each other within 35 deg
 ///   (a shaft near the lens narrows fast toward its tip; the border may cut it anywhere: the sides
