@@ -122,14 +122,12 @@ class AnnotatedMaskDetector final : public ShaftDetector {
   // The pixels on either side of a shaft / background boundary at the network's size (the view's
   // black edge ends the labels, not the shaft: no side there), at the processing size.
   cv::Mat sideBand(DetectionFrame const& frame) const {
-    cv::Mat small, shaft, background, grey, dark, band, p;
+    cv::Mat small, near_shaft, near_background, grey, dark, band, p;
     cv::resize(classes_, small, net_size_, 0, 0, cv::INTER_NEAREST);
-    shaft = small == 160;
-    background = small == 0;
-    cv::Mat const k = cv::Mat::ones(3, 3, CV_8U);
-    cv::dilate(shaft, band, k);
-    cv::dilate(background, p, k);
-    band = (band & background) | (p & shaft);
+    cv::Mat const shaft = small == 160, background = small == 0, k = cv::Mat::ones(3, 3, CV_8U);
+    cv::dilate(shaft, near_shaft, k);
+    cv::dilate(background, near_background, k);
+    band = (near_shaft & background) | (near_background & shaft);
     std::vector<cv::Mat> ch;
     cv::split(frame.bgr, ch);
     cv::max(ch[0], ch[1], grey);
